@@ -1,0 +1,412 @@
+"""Planar poses and the rectified stereo camera on a mobile robot, with analytic Jacobians.
+
+Frames (DESIGN.md §3, REP-103): the world/map frame is ``x, y`` on the floor with ``z`` up; the robot
+base has ``x`` forward, ``y`` left; the camera optical frame has ``z`` forward, ``x`` right, ``y`` down.
+The stereo head is mounted at ``(mount_x, mount_y)`` in the robot frame, ``mount_height`` above the
+floor, and pans by ``pan`` about the vertical axis through the *left* camera's optical centre, so the
+camera heading in the world is ``theta + pan``. The left camera is the reference; the right one sits at
+``+baseline`` along camera ``x``. Disparity ``d = u_l - u_r = f b / Z_c > 0``.
+
+Robot state ``X = (x [m], y [m], theta [rad])``; a vertical line landmark ``L = (x, y, z_low, z_high)``
+(paper Eq 1). Every function here is vectorised over leading axes of the point arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .errors import GeometryError, InputError, expected
+
+SIGMA_IMG = 0.5
+"""Pixel quantization error of a line's column, paper Sec 2.3.1 [px]."""
+
+MIN_DEPTH = 1e-3
+"""Points closer than this in front of the camera [m] are treated as not projectable."""
+
+
+def wrap_angle(a):
+    """Wrap angles to ``[-pi, pi)``; works on scalars and arrays."""
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def rot2(theta: float) -> np.ndarray:
+    """2×2 rotation matrix of angle ``theta`` [rad]."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+@dataclass(frozen=True)
+class SE2:
+    """A planar rigid transform ``T_a_b``: pose of frame b in frame a (``x, y`` in m, ``theta`` in rad).
+
+    ``T_a_c = T_a_b @ T_b_c``; ``p_a = T_a_b.transform(p_b)``.
+    """
+
+    x: float = 0.0
+    y: float = 0.0
+    theta: float = 0.0
+
+    @classmethod
+    def from_array(cls, a) -> SE2:
+        a = np.asarray(a, dtype=float).reshape(3)
+        return cls(float(a[0]), float(a[1]), float(wrap_angle(a[2])))
+
+    def as_array(self) -> np.ndarray:
+        """``(3,)`` array ``(x, y, theta)``."""
+        return np.array([self.x, self.y, self.theta])
+
+    @property
+    def translation(self) -> np.ndarray:
+        return np.array([self.x, self.y])
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return rot2(self.theta)
+
+    def matrix(self) -> np.ndarray:
+        """3×3 homogeneous matrix."""
+        m = np.eye(3)
+        m[:2, :2] = self.rotation
+        m[:2, 2] = self.translation
+        return m
+
+    def __matmul__(self, other: SE2) -> SE2:
+        t = self.translation + self.rotation @ other.translation
+        return SE2(float(t[0]), float(t[1]), float(wrap_angle(self.theta + other.theta)))
+
+    def inverse(self) -> SE2:
+        t = -self.rotation.T @ self.translation
+        return SE2(float(t[0]), float(t[1]), float(wrap_angle(-self.theta)))
+
+    def transform(self, points) -> np.ndarray:
+        """Map points ``(..., 2)`` given in frame b into frame a."""
+        p = np.asarray(points, dtype=float)
+        return p @ self.rotation.T + self.translation
+
+    def between(self, other: SE2) -> SE2:
+        """The relative motion ``self⁻¹ @ other`` (odometry increment from self to other)."""
+        return self.inverse() @ other
+
+
+@dataclass(frozen=True)
+class StereoCamera:
+    """A rectified stereo head on a mobile robot.
+
+    Attributes
+    ----------
+    width, height : image size [px].
+    f : focal length [px] (square pixels after rectification).
+    cu, cv : principal point [px].
+    baseline : distance between the optical centres [m]; the right camera at ``+baseline`` along camera x.
+    mount_x, mount_y : position of the left optical centre (pan axis) in the robot frame [m].
+    mount_height : height of the optical centres above the floor [m].
+    pan : pan angle of the head relative to the robot's heading [rad], positive to the left.
+    sigma_img : column uncertainty of a line in one image [px] (paper Sec 2.3.1).
+    """
+
+    width: int = 640
+    height: int = 480
+    f: float = 500.0
+    cu: float = 319.5
+    cv: float = 239.5
+    baseline: float = 0.12
+    mount_x: float = 0.0
+    mount_y: float = 0.0
+    mount_height: float = 1.0
+    pan: float = 0.0
+    sigma_img: float = SIGMA_IMG
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | np.integer) and v > 0):
+                raise InputError(expected("a positive integer number of pixels", v, where=f"camera.{name}"))
+        for name in ("f", "baseline", "sigma_img"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise InputError(expected("a positive number", v, where=f"camera.{name}"))
+        for name in ("cu", "cv", "mount_x", "mount_y", "mount_height", "pan"):
+            if not np.isfinite(getattr(self, name)):
+                raise InputError(expected("a finite number", getattr(self, name), where=f"camera.{name}"))
+
+    # ------------------------------------------------------------------ frames
+    def with_pan(self, pan: float) -> StereoCamera:
+        return replace(self, pan=float(pan))
+
+    def camera_pose(self, X) -> SE2:
+        """``T_world_cam`` in the plane: left optical centre and heading ``theta + pan``."""
+        X = np.asarray(X, dtype=float)
+        c = X[:2] + rot2(X[2]) @ np.array([self.mount_x, self.mount_y])
+        return SE2(float(c[0]), float(c[1]), float(wrap_angle(X[2] + self.pan)))
+
+    def to_camera(self, X, points) -> tuple[np.ndarray, np.ndarray]:
+        """Lateral ``X_c`` (right) and depth ``Z_c`` (forward) of world points ``(..., 2)`` in the left camera [m]."""
+        X = np.asarray(X, dtype=float)
+        p = np.asarray(points, dtype=float)
+        cam = self.camera_pose(X)
+        dx = p[..., 0] - cam.x
+        dy = p[..., 1] - cam.y
+        c, s = np.cos(cam.theta), np.sin(cam.theta)
+        Zc = c * dx + s * dy
+        Xc = s * dx - c * dy
+        return Xc, Zc
+
+    def from_camera(self, X, Xc, Zc) -> np.ndarray:
+        """World points ``(..., 2)`` from lateral/depth coordinates in the left camera."""
+        cam = self.camera_pose(X)
+        c, s = np.cos(cam.theta), np.sin(cam.theta)
+        Xc = np.asarray(Xc, dtype=float)
+        Zc = np.asarray(Zc, dtype=float)
+        return np.stack([cam.x + c * Zc + s * Xc, cam.y + s * Zc - c * Xc], axis=-1)
+
+    # -------------------------------------------------------------- projection
+    def project_columns(self, X, points, *, jacobians: bool = False):
+        """Image columns ``I = (u_l, u_r)`` of vertical lines through world points (paper Eq 3).
+
+        Parameters
+        ----------
+        X : (3,) robot pose ``(x, y, theta)`` in the world.
+        points : (..., 2) line positions ``(x, y)`` in the world [m].
+        jacobians : also return ``J_I_X`` (..., 2, 3) and ``J_I_p`` (..., 2, 2).
+
+        Returns
+        -------
+        uv : (..., 2) ``(u_l, u_r)`` [px]; NaN where the point is not in front of the camera
+        (``Z_c <= MIN_DEPTH``).
+        """
+        X = np.asarray(X, dtype=float)
+        p = np.asarray(points, dtype=float)
+        Xc, Zc = self.to_camera(X, p)
+        ok = Zc > MIN_DEPTH
+        Zs = np.where(ok, Zc, np.nan)
+        ul = self.cu + self.f * Xc / Zs
+        ur = ul - self.f * self.baseline / Zs
+        uv = np.stack([ul, ur], axis=-1)
+        if not jacobians:
+            return uv
+        J_I_X, J_I_p = self._column_jacobians(X, p, Xc, Zs)
+        return uv, J_I_X, J_I_p
+
+    def _column_jacobians(self, X, p, Xc, Zc):
+        cam = self.camera_pose(X)
+        c, s = np.cos(cam.theta), np.sin(cam.theta)
+        f, b = self.f, self.baseline
+        # d(Xc, Zc)/d(px, py)
+        dXc_dp = np.array([s, -c])
+        dZc_dp = np.array([c, s])
+        # u_l = cu + f Xc/Zc ; u_r = u_l - f b / Zc
+        dul_dXc = f / Zc
+        dul_dZc = -f * Xc / Zc**2
+        dur_dZc = dul_dZc + f * b / Zc**2
+        J_ul_p = dul_dXc[..., None] * dXc_dp + dul_dZc[..., None] * dZc_dp
+        J_ur_p = dul_dXc[..., None] * dXc_dp + dur_dZc[..., None] * dZc_dp
+        J_I_p = np.stack([J_ul_p, J_ur_p], axis=-2)
+        # Robot pose: the camera centre moves with (x, y) and rotates with theta.
+        # d = p - c_cam; d c_cam/d theta = R'(theta) m ; the heading psi = theta + pan.
+        m = np.array([self.mount_x, self.mount_y])
+        th = X[2]
+        dcam_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m
+        dx = p[..., 0] - cam.x
+        dy = p[..., 1] - cam.y
+        # Xc = s dx - c dy ; Zc = c dx + s dy ; dpsi/dtheta = 1
+        dXc_dth = c * dx + s * dy - (s * dcam_dth[0] - c * dcam_dth[1])
+        dZc_dth = -s * dx + c * dy - (c * dcam_dth[0] + s * dcam_dth[1])
+        J_ul_X = np.concatenate(
+            [-J_ul_p, (dul_dXc * dXc_dth + dul_dZc * dZc_dth)[..., None]], axis=-1
+        )
+        J_ur_X = np.concatenate(
+            [-J_ur_p, (dul_dXc * dXc_dth + dur_dZc * dZc_dth)[..., None]], axis=-1
+        )
+        J_I_X = np.stack([J_ul_X, J_ur_X], axis=-2)
+        return J_I_X, J_I_p
+
+    def project_line(self, X, L, *, jacobians: bool = False):
+        """Project a vertical line landmark ``L = (x, y, z_low, z_high)`` (Eq 1) into ``(u_l, u_r, v_top, v_bottom)``.
+
+        Eq 3 extended with the rows of the line's ends. With ``jacobians=True`` also returns
+        ``J_I_X`` (4, 3) and ``J_I_L`` (4, 4). Raises :class:`GeometryError` behind the camera.
+        """
+        X = np.asarray(X, dtype=float)
+        L = np.asarray(L, dtype=float).reshape(4)
+        Xc, Zc = self.to_camera(X, L[:2])
+        if not Zc > MIN_DEPTH:
+            raise GeometryError(f"line at ({L[0]:.3f}, {L[1]:.3f}) m is behind the camera (depth {Zc:.3f} m)")
+        uv, J_uv_X, J_uv_p = self.project_columns(X, L[:2], jacobians=True)
+        h, f = self.mount_height, self.f
+        v_top = self.cv + f * (h - L[3]) / Zc
+        v_bot = self.cv + f * (h - L[2]) / Zc
+        I = np.array([uv[0], uv[1], v_top, v_bot])
+        if not jacobians:
+            return I
+        _, dZc_dX, dZc_dp = self._depth_jacobians(X, L[:2])
+        J_I_X = np.zeros((4, 3))
+        J_I_L = np.zeros((4, 4))
+        J_I_X[:2] = J_uv_X
+        J_I_L[:2, :2] = J_uv_p
+        for row, z, col in ((2, L[3], 3), (3, L[2], 2)):
+            dv_dZc = -f * (h - z) / Zc**2
+            J_I_X[row] = dv_dZc * dZc_dX
+            J_I_L[row, :2] = dv_dZc * dZc_dp
+            J_I_L[row, col] = -f / Zc
+        return I, J_I_X, J_I_L
+
+    def _depth_jacobians(self, X, p):
+        """``Z_c`` of world points and its Jacobians ``(..., 3)`` w.r.t. X and ``(..., 2)`` w.r.t. p."""
+        X = np.asarray(X, dtype=float)
+        p = np.asarray(p, dtype=float)
+        cam = self.camera_pose(X)
+        c, s = np.cos(cam.theta), np.sin(cam.theta)
+        m = np.array([self.mount_x, self.mount_y])
+        th = X[2]
+        dcam_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m
+        dx = p[..., 0] - cam.x
+        dy = p[..., 1] - cam.y
+        Zc = c * dx + s * dy
+        dZc_dth = -s * dx + c * dy - (c * dcam_dth[0] + s * dcam_dth[1])
+        dZc_dp = np.broadcast_to(np.array([c, s]), p.shape).copy()
+        dZc_dX = np.concatenate([-dZc_dp, np.asarray(dZc_dth)[..., None]], axis=-1)
+        return Zc, dZc_dX, dZc_dp
+
+    def disparity(self, X, points, *, jacobians: bool = False):
+        """Disparity ``d = D(X) = f b / Z_c`` of world points ``(..., 2)`` (paper Eqs 8–9) [px].
+
+        With ``jacobians=True`` also returns ``J_d_X`` (..., 3) and ``J_d_p`` (..., 2).
+        NaN where the point is not in front of the camera.
+        """
+        Zc, dZc_dX, dZc_dp = self._depth_jacobians(X, points)
+        Zs = np.where(Zc > MIN_DEPTH, Zc, np.nan)
+        d = self.f * self.baseline / Zs
+        if not jacobians:
+            return d
+        dd_dZc = -self.f * self.baseline / Zs**2
+        return d, dd_dZc[..., None] * dZc_dX, dd_dZc[..., None] * dZc_dp
+
+    def cov_columns(self, X, cov_X, points, cov_points=None) -> np.ndarray:
+        """Covariance ``Σ_I`` (..., 2, 2) of ``(u_l, u_r)`` propagated from the pose and the point.
+
+        Paper Eq 4 (``cov_points`` given, (..., 2, 2) over world ``(x, y)``), Eq 5 (``cov_points=None``:
+        a known line such as a reference plane's edge).
+        """
+        _, J_X, J_p = self.project_columns(X, points, jacobians=True)
+        cov = J_X @ np.asarray(cov_X, dtype=float) @ np.swapaxes(J_X, -1, -2)
+        if cov_points is not None:
+            cov = cov + J_p @ np.asarray(cov_points, dtype=float) @ np.swapaxes(J_p, -1, -2)
+        return cov
+
+    def sigma_disparity(self, X, cov_X, points) -> np.ndarray:
+        """Standard deviation ``σ_d`` of the disparity of world points (paper Eq 10) [px].
+
+        ``σ_d² = (∂D/∂X) Σ_X (∂D/∂X)ᵀ + σ_ν²`` with ``σ_ν² = 2 σ_img²`` (Eq 7).
+        """
+        _, J_d_X, _ = self.disparity(X, points, jacobians=True)
+        var = np.einsum("...i,ij,...j->...", J_d_X, np.asarray(cov_X, dtype=float), J_d_X)
+        return np.sqrt(var + 2.0 * self.sigma_img**2)
+
+    # ----------------------------------------------------------- triangulation
+    def triangulate(self, u_l, u_r, X=None, cov_X=None, *, sigma_img: float | None = None):
+        """Triangulate image columns ``(u_l, u_r)`` into points on the floor plane with covariance.
+
+        Parameters
+        ----------
+        u_l, u_r : (...,) columns of the same vertical line in the left and right image [px].
+        X : (3,) robot pose; ``None`` returns camera coordinates ``(X_c, Z_c)`` instead of world ``(x, y)``.
+        cov_X : (3, 3) pose covariance over ``(x, y, theta)``, added to the result when given.
+        sigma_img : column standard deviation [px] (default: the camera's ``sigma_img``, Sec 2.3.1).
+
+        Returns
+        -------
+        p : (..., 2) world ``(x, y)`` [m] (or camera ``(X_c, Z_c)``); NaN where ``u_l - u_r <= 0``.
+        cov_p : (..., 2, 2) covariance of ``p`` [m²], first-order from ``σ_img`` on both columns
+        (independent) and, if given, from ``cov_X``.
+        """
+        u_l = np.asarray(u_l, dtype=float)
+        u_r = np.asarray(u_r, dtype=float)
+        s_img = self.sigma_img if sigma_img is None else float(sigma_img)
+        d = u_l - u_r
+        d = np.where(d > 0, d, np.nan)
+        fb = self.f * self.baseline
+        Zc = fb / d
+        Xc = (u_l - self.cu) * Zc / self.f
+        # d(Xc, Zc)/d(u_l, u_r)
+        dZ_dul = -fb / d**2
+        dZ_dur = fb / d**2
+        dX_dul = Zc / self.f + (u_l - self.cu) * dZ_dul / self.f
+        dX_dur = (u_l - self.cu) * dZ_dur / self.f
+        J_c_u = np.stack([np.stack([dX_dul, dX_dur], -1), np.stack([dZ_dul, dZ_dur], -1)], -2)
+        if X is None:
+            cov = s_img**2 * J_c_u @ np.swapaxes(J_c_u, -1, -2)
+            return np.stack([Xc, Zc], -1), cov
+        X = np.asarray(X, dtype=float)
+        cam = self.camera_pose(X)
+        c, s = np.cos(cam.theta), np.sin(cam.theta)
+        R_w_c = np.array([[s, c], [-c, s]])  # columns: world direction of camera x (right) and z (forward)
+        p = self.from_camera(X, Xc, Zc)
+        J_p_u = R_w_c @ J_c_u
+        cov = s_img**2 * J_p_u @ np.swapaxes(J_p_u, -1, -2)
+        if cov_X is not None:
+            J_p_X = self.triangulation_jacobian_pose(X, Xc, Zc)
+            cov = cov + J_p_X @ np.asarray(cov_X, dtype=float) @ np.swapaxes(J_p_X, -1, -2)
+        return p, cov
+
+    def triangulation_jacobian_pose(self, X, Xc, Zc) -> np.ndarray:
+        """``J_p_X`` (..., 2, 3): how a triangulated world point moves with the robot pose."""
+        X = np.asarray(X, dtype=float)
+        Xc = np.asarray(Xc, dtype=float)
+        Zc = np.asarray(Zc, dtype=float)
+        psi = X[2] + self.pan
+        c, s = np.cos(psi), np.sin(psi)
+        th = X[2]
+        m = np.array([self.mount_x, self.mount_y])
+        dcam_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m
+        # p = cam + Zc (c, s) + Xc (s, -c)
+        dpx_dth = dcam_dth[0] - s * Zc + c * Xc
+        dpy_dth = dcam_dth[1] + c * Zc + s * Xc
+        shape = np.broadcast(Xc, Zc).shape
+        J = np.zeros(shape + (2, 3))
+        J[..., 0, 0] = 1.0
+        J[..., 1, 1] = 1.0
+        J[..., 0, 2] = dpx_dth
+        J[..., 1, 2] = dpy_dth
+        return J
+
+    def heights(self, v, Zc) -> np.ndarray:
+        """Height above the floor [m] of image rows ``v`` at depth ``Zc``."""
+        return self.mount_height - (np.asarray(v, dtype=float) - self.cv) * np.asarray(Zc, dtype=float) / self.f
+
+    def triangulate_line(self, u_l, u_r, v_top, v_bottom, X=None, cov_X=None):
+        """A vertical line ``L = (x, y, z_low, z_high)`` (Eq 1) from a matched segment pair, with the
+        covariance (2, 2) of its ``(x, y)`` (or camera ``(X_c, Z_c)`` when ``X`` is None)."""
+        p, cov = self.triangulate(u_l, u_r, X, cov_X)
+        d = np.asarray(u_l, dtype=float) - np.asarray(u_r, dtype=float)
+        Zc = self.f * self.baseline / np.where(d > 0, d, np.nan)
+        z_high = self.heights(v_top, Zc)
+        z_low = self.heights(v_bottom, Zc)
+        L = np.concatenate([p, np.stack([z_low, z_high], -1)], -1)
+        return L, cov
+
+    # ------------------------------------------------------------- visibility
+    @property
+    def half_fov(self) -> float:
+        """Half of the horizontal field of view [rad] (to the outer pixel edge of the left image)."""
+        return float(np.arctan2(max(self.cu + 0.5, self.width - 0.5 - self.cu), self.f))
+
+    def in_image(self, u, margin: float = 0.0) -> np.ndarray:
+        u = np.asarray(u, dtype=float)
+        return (u >= -0.5 + margin) & (u <= self.width - 0.5 - margin)
+
+    def optical_centres(self, X) -> tuple[np.ndarray, np.ndarray]:
+        """World ``(x, y)`` of the left and right optical centres for robot pose X."""
+        cam = self.camera_pose(X)
+        right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
+        left_c = cam.translation
+        return left_c, left_c + self.baseline * right
+
+    def column_ray(self, X, u) -> np.ndarray:
+        """Unit world directions ``(..., 2)`` of the left camera's rays through image columns ``u``."""
+        cam = self.camera_pose(X)
+        c, s = np.cos(cam.theta), np.sin(cam.theta)
+        xn = (np.asarray(u, dtype=float) - self.cu) / self.f
+        d = np.stack([c + s * xn, s - c * xn], -1)
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)

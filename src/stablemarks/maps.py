@@ -1,0 +1,355 @@
+"""The 2D map of walls: reference planes with free edges, loading and saving, and visibility.
+
+A wall is a vertical plane standing on a segment ``P_M1 → P_M2`` of the floor (paper Fig 4). An edge of a
+wall is *free* when the camera can see it against the background (the partition's and the whiteboard's
+edges in the paper); a landmark's position is measured along the wall from a free edge (Eq 15). Walls with
+``reference: false`` are in the map only as occluders.
+
+File format (YAML, metres)::
+
+    frame: map                 # optional, informative
+    planes:
+      - id: partition          # unique, letters/digits/_/-
+        name: partition        # optional, free text (default: the id)
+        p1: [0.0, 4.0]         # P_M1 [m]
+        p2: [1.2, 4.0]         # P_M2 [m]
+        free_edges: [p1]       # which ends are free boundaries: [], [p1], [p2] or [p1, p2]
+        z: [0.0, 1.8]          # optional bottom and top height [m] (default [0, 2.5])
+        visible_from: both     # optional: both | left | right of the direction p1 → p2
+        reference: true        # optional: false = occluder only
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .errors import ConfigError, expected
+from .geometry import StereoCamera
+
+_ID = re.compile(r"^[A-Za-z0-9_\-]+$")
+SIDES = ("both", "left", "right")
+
+
+@dataclass(frozen=True)
+class ReferencePlane:
+    """One wall of the map: the segment ``p1 → p2`` on the floor [m] and its free edges."""
+
+    id: str
+    p1: tuple[float, float]
+    p2: tuple[float, float]
+    name: str = ""
+    free_edges: tuple[str, ...] = ()
+    z: tuple[float, float] = (0.0, 2.5)
+    visible_from: str = "both"
+    reference: bool = True
+
+    @property
+    def P1(self) -> np.ndarray:
+        return np.asarray(self.p1, dtype=float)
+
+    @property
+    def P2(self) -> np.ndarray:
+        return np.asarray(self.p2, dtype=float)
+
+    @property
+    def length(self) -> float:
+        """``d_M`` of Eq 15 [m]."""
+        return float(np.linalg.norm(self.P2 - self.P1))
+
+    @property
+    def direction(self) -> np.ndarray:
+        """Unit vector from ``p1`` to ``p2``."""
+        return (self.P2 - self.P1) / self.length
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal to the left of ``p1 → p2``."""
+        t = self.direction
+        return np.array([-t[1], t[0]])
+
+    @property
+    def label(self) -> str:
+        return self.name or self.id
+
+    def edge(self, which: str) -> np.ndarray:
+        """World position of edge ``"p1"`` or ``"p2"``."""
+        return self.P1 if which == "p1" else self.P2
+
+    def point_at(self, s, edge: str = "p1") -> np.ndarray:
+        """World points ``(..., 2)`` at distances ``s`` [m] along the wall from ``edge`` to the other end (Eq 15)."""
+        s = np.asarray(s, dtype=float)
+        start, direction = (self.P1, self.direction) if edge == "p1" else (self.P2, -self.direction)
+        return start + s[..., None] * direction
+
+    def along(self, points, edge: str = "p1") -> np.ndarray:
+        """Distance along the wall [m] of the projection of world points ``(..., 2)``, measured from ``edge``."""
+        p = np.asarray(points, dtype=float)
+        start, direction = (self.P1, self.direction) if edge == "p1" else (self.P2, -self.direction)
+        return (p - start) @ direction
+
+    def offset(self, points) -> np.ndarray:
+        """Signed distance [m] of world points ``(..., 2)`` from the wall's line (positive on its left)."""
+        return (np.asarray(points, dtype=float) - self.P1) @ self.normal
+
+    def faces(self, viewpoint) -> bool:
+        """Whether the wall's visible side faces a viewpoint ``(x, y)``."""
+        side = float(self.offset(viewpoint))
+        if self.visible_from == "left":
+            return side > 0
+        if self.visible_from == "right":
+            return side < 0
+        return side != 0
+
+    def to_dict(self) -> dict:
+        d = {
+            "id": self.id,
+            "name": self.name or self.id,
+            "p1": [float(v) for v in self.p1],
+            "p2": [float(v) for v in self.p2],
+            "free_edges": list(self.free_edges),
+            "z": [float(v) for v in self.z],
+        }
+        if self.visible_from != "both":
+            d["visible_from"] = self.visible_from
+        if not self.reference:
+            d["reference"] = False
+        return d
+
+
+@dataclass(frozen=True)
+class Map:
+    """A set of walls in the map frame."""
+
+    planes: tuple[ReferencePlane, ...]
+    frame: str = "map"
+    source: str = field(default="", compare=False)
+
+    def __post_init__(self) -> None:
+        ids = [p.id for p in self.planes]
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        if dup:
+            raise ConfigError(f"{self.source or 'map'}: planes: duplicate id {dup[0]!r}")
+
+    def __getitem__(self, plane_id: str) -> ReferencePlane:
+        for p in self.planes:
+            if p.id == plane_id:
+                return p
+        raise KeyError(plane_id)
+
+    def __iter__(self):
+        return iter(self.planes)
+
+    def __len__(self) -> int:
+        return len(self.planes)
+
+    @property
+    def reference_planes(self) -> tuple[ReferencePlane, ...]:
+        return tuple(p for p in self.planes if p.reference)
+
+    def segments(self) -> np.ndarray:
+        """All walls as an array ``(K, 2, 2)`` of end points [m]."""
+        if not self.planes:
+            return np.zeros((0, 2, 2))
+        return np.array([[p.P1, p.P2] for p in self.planes])
+
+    def to_dict(self) -> dict:
+        return {"frame": self.frame, "planes": [p.to_dict() for p in self.planes]}
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
+
+    @classmethod
+    def from_dict(cls, data: object, source: str = "map") -> Map:
+        return parse_map(data, source)
+
+    @classmethod
+    def load(cls, path: str | Path) -> Map:
+        return load_map(path)
+
+
+# ---------------------------------------------------------------- parsing
+def _number(v, where: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+        raise ConfigError(expected("a finite number", v, where=where))
+    return float(v)
+
+
+def _pair(v, where: str, what: str = "a list of 2 numbers [x, y] in metres") -> tuple[float, float]:
+    if not isinstance(v, list | tuple) or len(v) != 2:
+        raise ConfigError(expected(what, v, where=where))
+    return (_number(v[0], f"{where}[0]"), _number(v[1], f"{where}[1]"))
+
+
+def parse_plane(data: object, where: str) -> ReferencePlane:
+    """Validate one plane entry of a map file (see the module docstring)."""
+    if not isinstance(data, dict):
+        raise ConfigError(expected("a mapping with id, p1, p2", data, where=where))
+    known = {"id", "name", "p1", "p2", "free_edges", "z", "visible_from", "reference"}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ConfigError(f"{where}: unknown field {unknown[0]!r} (known: {', '.join(sorted(known))})")
+    for key in ("id", "p1", "p2"):
+        if key not in data:
+            raise ConfigError(f"{where}: missing field {key!r}")
+    pid = data["id"]
+    if isinstance(pid, int) and not isinstance(pid, bool):
+        pid = str(pid)
+    if not isinstance(pid, str) or not _ID.match(pid):
+        raise ConfigError(expected("an id of letters, digits, '_' or '-'", pid, where=f"{where}.id"))
+    name = data.get("name", pid)
+    if not isinstance(name, str):
+        raise ConfigError(expected("a string", name, where=f"{where}.name"))
+    p1 = _pair(data["p1"], f"{where}.p1")
+    p2 = _pair(data["p2"], f"{where}.p2")
+    if np.hypot(p2[0] - p1[0], p2[1] - p1[1]) < 1e-6:
+        raise ConfigError(f"{where}: p1 and p2 are the same point {list(p1)}; a wall needs a length")
+    free = data.get("free_edges", [])
+    if isinstance(free, str):
+        free = [free]
+    if not isinstance(free, list) or any(e not in ("p1", "p2") for e in free) or len(set(free)) != len(free):
+        raise ConfigError(expected("a list drawn from ['p1', 'p2']", free, where=f"{where}.free_edges"))
+    z = _pair(data.get("z", [0.0, 2.5]), f"{where}.z", "a list [z_low, z_high] in metres")
+    if not z[1] > z[0]:
+        raise ConfigError(expected("z_high > z_low", list(z), where=f"{where}.z"))
+    side = data.get("visible_from", "both")
+    if side not in SIDES:
+        raise ConfigError(expected(f"one of {', '.join(SIDES)}", side, where=f"{where}.visible_from"))
+    ref = data.get("reference", True)
+    if not isinstance(ref, bool):
+        raise ConfigError(expected("true or false", ref, where=f"{where}.reference"))
+    return ReferencePlane(pid, p1, p2, name, tuple(sorted(free)), z, side, ref)
+
+
+def parse_map(data: object, source: str = "map") -> Map:
+    """Validate a map document (already parsed from YAML)."""
+    if not isinstance(data, dict):
+        raise ConfigError(expected("a mapping with a 'planes' list", type(data).__name__, where=source))
+    if "planes" not in data:
+        raise ConfigError(f"{source}: missing field 'planes' (a list of walls)")
+    planes = data["planes"]
+    if not isinstance(planes, list):
+        raise ConfigError(expected("a list of walls", planes, where=f"{source}: planes"))
+    frame = data.get("frame", "map")
+    if not isinstance(frame, str):
+        raise ConfigError(expected("a frame name", frame, where=f"{source}: frame"))
+    parsed = tuple(parse_plane(p, f"{source}: planes[{i}]") for i, p in enumerate(planes))
+    return Map(parsed, frame, source)
+
+
+def read_yaml(path: str | Path, what: str = "file") -> object:
+    """Read a YAML file; a missing file or a syntax error becomes a one-line :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such {what}") from None
+    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read {what}: {exc.__class__.__name__}") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or "invalid YAML"
+        raise ConfigError(f"{path}: invalid YAML{at}: {problem}") from None
+
+
+def load_map(path: str | Path) -> Map:
+    """Load and validate a map file (format in the module docstring)."""
+    return parse_map(read_yaml(path, "map file"), str(path))
+
+
+# ------------------------------------------------------------- visibility
+def segments_block(origins, targets, walls, exclude: Sequence[int] = ()) -> np.ndarray:
+    """Whether the sight lines ``origins → targets`` (N, 2) cross any wall of ``walls`` (K, 2, 2).
+
+    Walls whose index is in ``exclude`` are ignored (the wall a target lies on). Touching a wall only
+    at the very end of the sight line does not block.
+    """
+    o = np.asarray(origins, dtype=float).reshape(-1, 2)
+    t = np.asarray(targets, dtype=float).reshape(-1, 2)
+    o = np.broadcast_to(o, t.shape)
+    walls = np.asarray(walls, dtype=float).reshape(-1, 2, 2)
+    keep = np.ones(len(walls), dtype=bool)
+    keep[list(exclude)] = False
+    walls = walls[keep]
+    if len(walls) == 0 or len(t) == 0:
+        return np.zeros(len(t), dtype=bool)
+    r = (t - o)[:, None, :]  # (N,1,2)
+    a = walls[None, :, 0, :]  # (1,K,2)
+    s = (walls[:, 1, :] - walls[:, 0, :])[None]  # (1,K,2)
+    denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]
+    qp = a - o[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
+        mu = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
+    hit = (np.abs(denom) > 1e-12) & (lam > 1e-9) & (lam < 1 - 1e-6) & (mu >= 0) & (mu <= 1)
+    return hit.any(axis=1)
+
+
+@dataclass(frozen=True)
+class VisiblePart:
+    """The part of a wall a camera sees: intervals of distance along the wall from ``p1`` [m]."""
+
+    plane: ReferencePlane
+    intervals: tuple[tuple[float, float], ...]
+    free_edges_visible: tuple[str, ...]
+
+    @property
+    def visible_length(self) -> float:
+        return float(sum(b - a for a, b in self.intervals))
+
+
+def visible_parts(
+    world_map: Map,
+    camera: StereoCamera,
+    X,
+    *,
+    max_range: float = 12.0,
+    step: float = 0.02,
+    margin_px: float = 0.0,
+    planes: Iterable[ReferencePlane] | None = None,
+) -> list[VisiblePart]:
+    """Which walls, and which parts of each, the left camera sees from robot pose ``X``.
+
+    A point of a wall is visible when it projects inside the left image (with ``margin_px`` to spare),
+    lies within ``max_range`` [m] in front of the camera, the wall faces the camera, and no other wall of
+    the map blocks the sight line. Walls are sampled every ``step`` [m]; walls with nothing visible are
+    left out. A free edge counts as visible when the wall is visible within one step of it.
+    """
+    cam = camera
+    centre, _ = cam.optical_centres(X)
+    walls = world_map.segments()
+    index = {p.id: i for i, p in enumerate(world_map.planes)}
+    out: list[VisiblePart] = []
+    for plane in planes if planes is not None else world_map.planes:
+        if not plane.faces(centre):
+            continue
+        n = max(2, int(np.ceil(plane.length / step)) + 1)
+        s = np.linspace(0.0, plane.length, n)
+        pts = plane.point_at(s)
+        Xc, Zc = cam.to_camera(X, pts)
+        uv = cam.project_columns(X, pts)
+        ok = (Zc > 0.05) & (np.hypot(Xc, Zc) <= max_range) & cam.in_image(uv[:, 0], margin_px)
+        if ok.any():
+            ok[ok] &= ~segments_block(centre, pts[ok], walls, exclude=[index[plane.id]])
+        if not ok.any():
+            continue
+        intervals = _runs(s, ok)
+        free = tuple(
+            e for e in plane.free_edges if any(abs((0.0 if e == "p1" else plane.length) - v) <= step * 1.01
+                                               for iv in intervals for v in iv)
+        )
+        out.append(VisiblePart(plane, intervals, free))
+    return out
+
+
+def _runs(s: np.ndarray, ok: np.ndarray) -> tuple[tuple[float, float], ...]:
+    idx = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    return tuple((float(s[a]), float(s[b - 1])) for a, b in zip(idx[::2], idx[1::2], strict=True))

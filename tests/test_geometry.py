@@ -171,3 +171,16 @@ def test_column_ray_points_at_projection():
     c, _ = cam.optical_centres(X)
     direction = (p - c) / np.linalg.norm(p - c)
     np.testing.assert_allclose(ray, direction, atol=1e-12)
+
+
+def test_triangulation_with_separate_column_sigmas():
+    cam = camera(0.0)
+    X = np.array([0.0, 0.0, np.pi / 2])
+    p = point_in_front(cam, X, 4.0, 0.5)
+    uv = cam.project_columns(X, p)
+    _, cov_equal = cam.triangulate(uv[0], uv[1], X, sigma_img=2.0)
+    _, cov_pair = cam.triangulate(uv[0], uv[1], X, sigma_img=np.array([2.0, 2.0]))
+    np.testing.assert_allclose(cov_pair, cov_equal)
+    _, cov_left_only = cam.triangulate(uv[0], uv[1], X, sigma_img=np.array([2.0, 0.0]))
+    _, cov_right_only = cam.triangulate(uv[0], uv[1], X, sigma_img=np.array([0.0, 2.0]))
+    np.testing.assert_allclose(cov_left_only + cov_right_only, cov_equal)

@@ -305,7 +305,7 @@ class StereoCamera:
         return np.sqrt(var + 2.0 * self.sigma_img**2)
 
     # ----------------------------------------------------------- triangulation
-    def triangulate(self, u_l, u_r, X=None, cov_X=None, *, sigma_img: float | None = None):
+    def triangulate(self, u_l, u_r, X=None, cov_X=None, *, sigma_img=None):
         """Triangulate image columns ``(u_l, u_r)`` into points on the floor plane with covariance.
 
         Parameters
@@ -313,7 +313,8 @@ class StereoCamera:
         u_l, u_r : (...,) columns of the same vertical line in the left and right image [px].
         X : (3,) robot pose; ``None`` returns camera coordinates ``(X_c, Z_c)`` instead of world ``(x, y)``.
         cov_X : (3, 3) pose covariance over ``(x, y, theta)``, added to the result when given.
-        sigma_img : column standard deviation [px] (default: the camera's ``sigma_img``, Sec 2.3.1).
+        sigma_img : column standard deviation [px] (default: the camera's ``sigma_img``, Sec 2.3.1); a scalar
+            for both images or ``(..., 2)`` for ``(σ_l, σ_r)`` separately (e.g. a searched boundary, Sec 3.2).
 
         Returns
         -------
@@ -323,7 +324,8 @@ class StereoCamera:
         """
         u_l = np.asarray(u_l, dtype=float)
         u_r = np.asarray(u_r, dtype=float)
-        s_img = self.sigma_img if sigma_img is None else float(sigma_img)
+        s_img = np.asarray(self.sigma_img if sigma_img is None else sigma_img, dtype=float)
+        var_uv = np.broadcast_to(s_img**2, np.broadcast(u_l, u_r).shape + (2,)) if s_img.ndim else None
         d = u_l - u_r
         d = np.where(d > 0, d, np.nan)
         fb = self.f * self.baseline
@@ -335,16 +337,19 @@ class StereoCamera:
         dX_dul = Zc / self.f + (u_l - self.cu) * dZ_dul / self.f
         dX_dur = (u_l - self.cu) * dZ_dur / self.f
         J_c_u = np.stack([np.stack([dX_dul, dX_dur], -1), np.stack([dZ_dul, dZ_dur], -1)], -2)
+        def propagate(J):
+            if var_uv is None:
+                return s_img**2 * J @ np.swapaxes(J, -1, -2)
+            return (J * var_uv[..., None, :]) @ np.swapaxes(J, -1, -2)
+
         if X is None:
-            cov = s_img**2 * J_c_u @ np.swapaxes(J_c_u, -1, -2)
-            return np.stack([Xc, Zc], -1), cov
+            return np.stack([Xc, Zc], -1), propagate(J_c_u)
         X = np.asarray(X, dtype=float)
         cam = self.camera_pose(X)
         c, s = np.cos(cam.theta), np.sin(cam.theta)
         R_w_c = np.array([[s, c], [-c, s]])  # columns: world direction of camera x (right) and z (forward)
         p = self.from_camera(X, Xc, Zc)
-        J_p_u = R_w_c @ J_c_u
-        cov = s_img**2 * J_p_u @ np.swapaxes(J_p_u, -1, -2)
+        cov = propagate(R_w_c @ J_c_u)
         if cov_X is not None:
             J_p_X = self.triangulation_jacobian_pose(X, Xc, Zc)
             cov = cov + J_p_X @ np.asarray(cov_X, dtype=float) @ np.swapaxes(J_p_X, -1, -2)

@@ -1,0 +1,392 @@
+"""Reference planes in the disparity image: prediction with 3σ gates, robust fitting, members.
+
+Paper Sec 2.3–2.4. For every reference plane (a wall of the map) in view of the robot's belief
+``(X, Σ_X)``, :func:`predict_plane` gives the image columns where the plane can appear (the projected
+ends ±3σ, Eqs 3–6) and, column by column, the disparity the plane would have with its standard deviation
+(Eqs 7–10). :func:`fit_plane` turns the disparity pixels inside that band into points and fits the wall's
+line (Eq 11) with its covariance. DESIGN.md §4: the paper's ``y = a + b x`` is ill-posed for walls along
+the viewing direction, so the line is fitted in the wall's own frame — offset ``o`` along the wall's
+normal as a function of the distance ``s`` along it, ``o = a + b (s − s0)`` — with each point weighted by
+its depth uncertainty projected on the normal, after rejecting points off the wall (clutter).
+
+Frames: world/map. Points are placed in the world with the *mean* pose: everything downstream
+(point-on-plane fusion, boundary, relative model) uses positions relative to the observed plane, so the
+pose's uncertainty enters only through the prediction gates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .geometry import StereoCamera
+from .maps import Map, ReferencePlane, visible_parts
+
+
+@dataclass(frozen=True)
+class PlaneConfig:
+    """Thresholds of plane prediction and fitting (paper defaults where the paper gives one)."""
+
+    gate_sigma: float = 3.0
+    """Width of every prediction gate in standard deviations (Eq 6)."""
+    disparity_noise_px: float | None = None
+    """σ_ν of one disparity pixel [px]; default ``sqrt(2)·σ_img`` (Eq 7)."""
+    view_margin_px: float = 80.0
+    """Planes whose ends project up to this far outside the image are still predicted."""
+    max_range: float = 15.0
+    """Planes farther than this [m] are not predicted."""
+    min_pixels: int = 300
+    """Fewer valid disparity pixels in the band than this: no plane this frame."""
+    min_columns: int = 10
+    """The band's pixels must span at least this many columns."""
+    outlier_sigma: float = 3.0
+    """Points farther than this many robust standard deviations (1.4826·MAD of the normalised residuals)
+    from the line are not on the wall."""
+    correlation_px: float = 15.0
+    """Neighbouring disparity pixels are not independent: a window of this size [px] shares its SAD
+    support (the block size), so the fitted line's covariance is inflated by ``correlation_px`` (one
+    independent measurement per window width along a row)."""
+    row_margin_px: float = 4.0
+    """Rows this far outside the wall's predicted top/bottom still count."""
+    member_min_fraction: float = 0.5
+    """A segment belongs to a planar region when this fraction of its pixels lies in the region (Sec 2.4)."""
+    member_dilate_px: int = 3
+    """The region is dilated by this much before the membership test (edges sit at region borders)."""
+
+    def sigma_nu(self, camera: StereoCamera) -> float:
+        return float(self.disparity_noise_px) if self.disparity_noise_px else float(np.sqrt(2.0) * camera.sigma_img)
+
+
+@dataclass(frozen=True)
+class EdgePrediction:
+    """Predicted image columns of a wall's end ``(u_l, u_r)`` and their standard deviations (Eqs 3–5)."""
+
+    which: str
+    point: np.ndarray
+    u: np.ndarray
+    sigma: np.ndarray
+    free: bool
+
+    def window(self, image: int = 0, gate: float = 3.0) -> tuple[float, float]:
+        """Search interval ``u ± gate·σ`` in the left (0) or right (1) image (Eq 6)."""
+        return float(self.u[image] - gate * self.sigma[image]), float(self.u[image] + gate * self.sigma[image])
+
+
+@dataclass(frozen=True)
+class PlanePrediction:
+    """Where a reference plane appears in the left image, and with which disparity.
+
+    Attributes
+    ----------
+    plane : the map's wall.
+    columns : (K,) integer columns of the left image inside the 3σ window.
+    d : (K,) predicted disparity of the wall at each column [px] (Eqs 8–9).
+    sigma_d : (K,) its standard deviation (Eq 10) [px].
+    v_top, v_bottom : (K,) rows of the wall's top and bottom at each column.
+    edges : the wall's two ends ``{"p1": EdgePrediction, "p2": ...}``.
+    gate : gate width in σ.
+    """
+
+    plane: ReferencePlane
+    columns: np.ndarray
+    d: np.ndarray
+    sigma_d: np.ndarray
+    v_top: np.ndarray
+    v_bottom: np.ndarray
+    edges: dict[str, EdgePrediction]
+    gate: float = 3.0
+
+    @property
+    def window(self) -> tuple[int, int]:
+        return int(self.columns[0]), int(self.columns[-1])
+
+    def disparity_at(self, u) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted disparity and σ_d at (sub-pixel) left columns ``u`` (linear interpolation)."""
+        u = np.asarray(u, dtype=float)
+        return np.interp(u, self.columns, self.d), np.interp(u, self.columns, self.sigma_d)
+
+    def band(self, disparity: np.ndarray, row_margin: float = 0.0) -> np.ndarray:
+        """Pixels (H, W) of a left-reference disparity image inside the plane's 3σ band (Sec 2.3.4)."""
+        H, W = disparity.shape
+        mask = np.zeros((H, W), dtype=bool)
+        u0, u1 = self.window
+        sub = disparity[:, u0 : u1 + 1]
+        with np.errstate(invalid="ignore"):
+            ok = np.abs(sub - self.d[None, :]) <= self.gate * self.sigma_d[None, :]
+        rows = np.arange(H)[:, None]
+        ok &= (rows >= self.v_top[None, :] - row_margin) & (rows <= self.v_bottom[None, :] + row_margin)
+        mask[:, u0 : u1 + 1] = ok
+        return mask
+
+
+def column_depth_on_wall(camera: StereoCamera, X, plane: ReferencePlane, u, *, jacobian: bool = False):
+    """Depth ``Z_c`` [m] at which the left camera's column ``u`` meets the wall's (infinite) line.
+
+    With ``jacobian=True`` also returns ``J_Z_X`` (K, 3), the derivative at a *fixed column* (the wall
+    point seen there slides along the wall as the pose moves), which is what Eq 10 needs for a plane.
+    NaN where the ray is parallel to the wall or meets it behind the camera.
+    """
+    X = np.asarray(X, dtype=float)
+    u = np.asarray(u, dtype=float)
+    cam = camera.camera_pose(X)
+    psi = cam.theta
+    fwd = np.array([np.cos(psi), np.sin(psi)])
+    right = np.array([np.sin(psi), -np.cos(psi)])
+    xn = (u - camera.cu) / camera.f
+    r = fwd[None, :] + xn[:, None] * right[None, :]  # (K,2): world direction with unit depth
+    n = plane.normal
+    c0 = float(n @ plane.P1)
+    c = cam.translation
+    nr = r @ n
+    num = c0 - n @ c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Z = num / nr
+    Z = np.where(Z > 1e-3, Z, np.nan)
+    if not jacobian:
+        return Z
+    th = X[2]
+    m = np.array([camera.mount_x, camera.mount_y])
+    dc_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m
+    dr_dth = np.array([-np.sin(psi), np.cos(psi)])[None, :] + xn[:, None] * np.array([np.cos(psi), np.sin(psi)])[None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dZ_dx = -n[0] / nr
+        dZ_dy = -n[1] / nr
+        dZ_dth = (-(n @ dc_dth) * nr - num * (dr_dth @ n)) / nr**2
+    return Z, np.stack([dZ_dx, dZ_dy, dZ_dth], axis=-1)
+
+
+def predict_plane(
+    camera: StereoCamera,
+    X,
+    cov_X,
+    plane: ReferencePlane,
+    config: PlaneConfig = PlaneConfig(),
+) -> PlanePrediction | None:
+    """Predict where ``plane`` appears in the left image from the belief ``(X, cov_X)`` (Eqs 3–10).
+
+    Returns None when no column of the 3σ window falls in the image or the plane is behind the camera.
+    """
+    X = np.asarray(X, dtype=float)
+    cov_X = np.asarray(cov_X, dtype=float)
+    gate = config.gate_sigma
+    ends = np.stack([plane.P1, plane.P2])
+    uv = camera.project_columns(X, ends)
+    cov_I = camera.cov_columns(X, cov_X, ends)  # Eq 5: known wall ends
+    sig = np.sqrt(np.stack([cov_I[:, 0, 0], cov_I[:, 1, 1]], axis=-1) + camera.sigma_img**2)
+    edges = {
+        w: EdgePrediction(w, ends[i], uv[i], sig[i], w in plane.free_edges) for i, w in enumerate(("p1", "p2"))
+    }
+    # Column interval of the plane: the visible part of the wall, widened by the ends' 3σ (Eq 6).
+    _, Zc = camera.to_camera(X, ends)
+    if np.all(~(Zc > 1e-3)):
+        return None
+    W = camera.width
+    if np.all(np.isfinite(uv[:, 0])):
+        lo = np.nanmin(uv[:, 0] - gate * sig[:, 0])
+        hi = np.nanmax(uv[:, 0] + gate * sig[:, 0])
+    else:  # one end behind the camera: the wall runs out of the image on that side
+        inside = np.isfinite(uv[:, 0])
+        u_in = uv[inside, 0][0]
+        s_in = sig[inside, 0][0]
+        # which side of the image does the wall leave by? look at a point just in front of the camera
+        parts = visible_parts(Map((plane,)), camera, X, max_range=config.max_range, margin_px=-config.view_margin_px)
+        if not parts:
+            return None
+        probe = plane.point_at(np.array([np.mean(parts[0].intervals[0])]))[0]
+        u_probe = camera.project_columns(X, probe)[0]
+        lo, hi = (u_in - gate * s_in, W - 0.5) if u_probe >= u_in else (-0.5, u_in + gate * s_in)
+    u0 = int(np.clip(np.ceil(lo), 0, W - 1))
+    u1 = int(np.clip(np.floor(hi), 0, W - 1))
+    if hi < 0 or lo > W - 1 or u1 < u0:
+        return None
+    columns = np.arange(u0, u1 + 1)
+    Z, J_Z_X = column_depth_on_wall(camera, X, plane, columns, jacobian=True)
+    ok = np.isfinite(Z) & (Z <= config.max_range)
+    if not ok.any():
+        return None
+    columns, Z, J_Z_X = columns[ok], Z[ok], J_Z_X[ok]
+    fb = camera.f * camera.baseline
+    d = fb / Z
+    J_d_X = (-fb / Z**2)[:, None] * J_Z_X
+    var_d = np.einsum("ki,ij,kj->k", J_d_X, cov_X, J_d_X) + config.sigma_nu(camera) ** 2  # Eq 10
+    z_low, z_high = plane.z
+    v_top = camera.cv + camera.f * (camera.mount_height - z_high) / Z
+    v_bottom = camera.cv + camera.f * (camera.mount_height - z_low) / Z
+    return PlanePrediction(plane, columns, d, np.sqrt(var_d), v_top, v_bottom, edges, gate)
+
+
+def predict_planes(camera: StereoCamera, X, cov_X, world_map: Map, config: PlaneConfig = PlaneConfig()):
+    """Predictions for every reference plane in view of the belief (see :func:`predict_plane`)."""
+    in_view = visible_parts(
+        world_map, camera, X, max_range=config.max_range, margin_px=-config.view_margin_px,
+        planes=world_map.reference_planes,
+    )
+    out = []
+    for part in in_view:
+        pred = predict_plane(camera, X, cov_X, part.plane, config)
+        if pred is not None:
+            out.append(pred)
+    return out
+
+
+# ------------------------------------------------------------------- fitting
+@dataclass(frozen=True)
+class FailedFit:
+    """No plane this frame (falsy): too few pixels in the band, or a degenerate spread."""
+
+    plane: ReferencePlane
+    reason: str
+    n_pixels: int = 0
+
+    def __bool__(self) -> bool:
+        return False
+
+
+@dataclass(frozen=True)
+class PlaneFit:
+    """A wall's line fitted to disparity pixels (Eq 11, in the wall's own frame).
+
+    The observed wall is ``o = a + b (s − s0)``: ``s`` distance along the map wall from ``p1`` [m],
+    ``o`` signed offset from the map wall's line along its normal [m]. ``cov_R`` (2, 2) is the covariance
+    of ``R = (a, b)`` [m², m·1, 1]. ``region`` (H, W) marks the inlier pixels of the left image
+    (the planar region, Sec 2.4).
+    """
+
+    plane: ReferencePlane
+    prediction: PlanePrediction
+    a: float
+    b: float
+    s0: float
+    cov_R: np.ndarray
+    region: np.ndarray
+    n_points: int
+    n_inliers: int
+    chi2_dof: float
+    X: np.ndarray = field(repr=False)
+
+    def __bool__(self) -> bool:
+        return True
+
+    def constraint(self, P) -> tuple[float, np.ndarray, np.ndarray]:
+        """Eq 12 for a point ``P`` (2,) in the world: ``G = o(P) − a − b (s(P) − s0)`` with
+        ``J_G_P`` (2,) and ``J_G_R`` (2,)."""
+        P = np.asarray(P, dtype=float)
+        s = float(self.plane.along(P))
+        o = float(self.plane.offset(P))
+        G = o - self.a - self.b * (s - self.s0)
+        J_G_P = self.plane.normal - self.b * self.plane.direction
+        J_G_R = np.array([-1.0, -(s - self.s0)])
+        return G, J_G_P, J_G_R
+
+    def fuse_point(self, P, cov_P) -> tuple[np.ndarray, np.ndarray]:
+        """Combine a triangulated point with the fitted plane by one Kalman update (Eqs 12–14).
+
+        ``Y = H L + V`` with ``H = ∂G/∂L`` and ``Σ_V = G_R Σ_R G_Rᵀ`` (Eq 14); the covariance uses the Joseph
+        form. ``G`` is linear in ``L``, so one update is exact. Returns ``(P̂, Σ̂)`` in the world frame.
+        """
+        P = np.asarray(P, dtype=float)
+        cov_P = np.asarray(cov_P, dtype=float)
+        G, H, G_R = self.constraint(P)
+        var_V = float(G_R @ self.cov_R @ G_R)
+        S = float(H @ cov_P @ H) + var_V
+        K = cov_P @ H / S
+        P_hat = P - K * G  # innovation 0 − G(L̃)
+        IKH = np.eye(2) - np.outer(K, H)
+        cov_hat = IKH @ cov_P @ IKH.T + var_V * np.outer(K, K)
+        return P_hat, 0.5 * (cov_hat + cov_hat.T)
+
+    def point_on_line(self, s) -> np.ndarray:
+        """World points on the fitted line at distances ``s`` along the map wall."""
+        s = np.asarray(s, dtype=float)
+        o = self.a + self.b * (s - self.s0)
+        return self.plane.point_at(s) + o[..., None] * self.plane.normal
+
+
+def pixels_to_world(camera: StereoCamera, X, u, d) -> tuple[np.ndarray, np.ndarray]:
+    """World points (N, 2) of left pixels with disparity ``d``, and their world direction of depth error
+    (N, 2) per metre of depth (for weighting), using the mean pose ``X``."""
+    fb = camera.f * camera.baseline
+    Z = fb / d
+    Xc = (u - camera.cu) * Z / camera.f
+    P = camera.from_camera(X, Xc, Z)
+    cam = camera.camera_pose(X)
+    fwd = np.array([np.cos(cam.theta), np.sin(cam.theta)])
+    right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
+    w = fwd[None, :] + ((u - camera.cu) / camera.f)[:, None] * right[None, :]
+    return P, w
+
+
+def fit_plane(
+    camera: StereoCamera,
+    X,
+    disparity: np.ndarray,
+    prediction: PlanePrediction,
+    config: PlaneConfig = PlaneConfig(),
+) -> PlaneFit | FailedFit:
+    """Fit the wall's line to the disparity pixels inside the prediction's band (Sec 2.3.4, Eq 11).
+
+    Robust weighted least squares in the wall frame: weights from each pixel's depth uncertainty
+    projected on the wall normal; points farther than ``outlier_sigma`` robust σ from the line are
+    dropped and the fit repeated (clutter in front of the wall does not bend it).
+    """
+    plane = prediction.plane
+    band = prediction.band(disparity, config.row_margin_px)
+    vs, us = np.nonzero(band)
+    if len(us) < config.min_pixels:
+        return FailedFit(plane, f"{len(us)} disparity pixels in the predicted band (need {config.min_pixels})", len(us))
+    if len(np.unique(us)) < config.min_columns:
+        return FailedFit(plane, "band pixels span too few columns", len(us))
+    d = disparity[vs, us].astype(float)
+    P, w = pixels_to_world(camera, X, us.astype(float), d)
+    fb = camera.f * camera.baseline
+    Z = fb / d
+    sigma_Z = Z**2 / fb * config.sigma_nu(camera)
+    s = plane.along(P)
+    o = plane.offset(P)
+    sigma_o = np.abs(w @ plane.normal) * sigma_Z + 1e-6
+    # Robust start: the median offset, then reweighted least squares with outlier rejection.
+    inl = np.ones(len(s), dtype=bool)
+    a, b = float(np.median(o)), 0.0
+    s0 = float(np.median(s))
+    for _ in range(4):
+        r = (o - a - b * (s - s0)) / sigma_o
+        # the data's own spread, not the model's σ: disparity noise is often below σ_ν, and clutter
+        # a few tens of cm in front of a wall is then still separable
+        scale = max(1e-3, 1.4826 * float(np.median(np.abs(r[inl]))))
+        inl = np.abs(r) <= config.outlier_sigma * scale
+        if inl.sum() < config.min_pixels // 2:
+            return FailedFit(plane, "too few pixels agree on one wall line", len(us))
+        wgt = 1.0 / sigma_o[inl] ** 2
+        s0 = float(np.sum(wgt * s[inl]) / np.sum(wgt))
+        A = np.stack([np.ones(inl.sum()), s[inl] - s0], axis=1)
+        N = A.T @ (A * wgt[:, None])
+        if np.linalg.cond(N) > 1e12:
+            return FailedFit(plane, "wall seen over too short a span to fit", len(us))
+        a, b = np.linalg.solve(N, A.T @ (wgt * o[inl]))
+    r = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
+    dof = max(1, int(inl.sum()) - 2)
+    chi2_dof = float(r @ r) / dof
+    cov_R = np.linalg.inv(N) * max(1.0, chi2_dof) * config.correlation_px
+    region = np.zeros_like(band)
+    region[vs[inl], us[inl]] = True
+    return PlaneFit(plane, prediction, float(a), float(b), s0, cov_R, region, len(us), int(inl.sum()), chi2_dof,
+                    np.asarray(X, dtype=float))
+
+
+def segment_in_region(region: np.ndarray, pixels: np.ndarray, config: PlaneConfig = PlaneConfig()) -> float:
+    """Fraction of a segment's pixels ``(n, 2)`` as ``(v, u)`` that lie in the (dilated) planar region."""
+    if len(pixels) == 0:
+        return 0.0
+    v = np.clip(pixels[:, 0], 0, region.shape[0] - 1)
+    u = np.clip(pixels[:, 1], 0, region.shape[1] - 1)
+    return float(region[v, u].mean())
+
+
+def dilate(region: np.ndarray, px: int) -> np.ndarray:
+    """Binary dilation by a square of half-size ``px``."""
+    if px <= 0:
+        return region
+    k = np.ones((2 * px + 1, 2 * px + 1), np.uint8)
+    return cv2.dilate(region.astype(np.uint8), k).astype(bool)

@@ -375,13 +375,35 @@ def fit_plane(
                     np.asarray(X, dtype=float))
 
 
-def segment_in_region(region: np.ndarray, pixels: np.ndarray, config: PlaneConfig = PlaneConfig()) -> float:
-    """Fraction of a segment's pixels ``(n, 2)`` as ``(v, u)`` that lie in the (dilated) planar region."""
+def segment_in_region(region: np.ndarray, pixels: np.ndarray) -> float:
+    """Fraction of a segment's pixels ``(n, 2)`` given as integer ``(u, v)`` that lie in ``region`` (H, W)."""
     if len(pixels) == 0:
         return 0.0
-    v = np.clip(pixels[:, 0], 0, region.shape[0] - 1)
-    u = np.clip(pixels[:, 1], 0, region.shape[1] - 1)
+    u = np.clip(pixels[:, 0], 0, region.shape[1] - 1)
+    v = np.clip(pixels[:, 1], 0, region.shape[0] - 1)
     return float(region[v, u].mean())
+
+
+def plane_members(fit: PlaneFit, pairs, left_segments, config: PlaneConfig = PlaneConfig()) -> np.ndarray:
+    """Segment pairs that belong to a fitted planar region (Sec 2.4): boolean mask over ``pairs``.
+
+    A pair belongs when at least ``member_min_fraction`` of its left segment's pixels lie in the region
+    (dilated by ``member_dilate_px``: an edge pixel sits on the region's border), and its own disparity
+    agrees with the plane's predicted disparity at its column within the 3σ gate.
+    """
+    n = len(pairs)
+    if n == 0:
+        return np.zeros(0, dtype=bool)
+    region = dilate(fit.region, config.member_dilate_px)
+    u0, u1 = fit.prediction.window
+    d_pred, s_pred = fit.prediction.disparity_at(pairs.u_left)
+    inside = (pairs.u_left >= u0 - 0.5) & (pairs.u_left <= u1 + 0.5)
+    agree = inside & (np.abs(pairs.disparity - d_pred) <= fit.prediction.gate * s_pred)
+    out = np.zeros(n, dtype=bool)
+    for k in np.flatnonzero(agree):
+        frac = segment_in_region(region, left_segments.pixels(int(pairs.left_index[k])))
+        out[k] = frac >= config.member_min_fraction
+    return out
 
 
 def dilate(region: np.ndarray, px: int) -> np.ndarray:

@@ -1,0 +1,356 @@
+"""Landmark modeling on known planes and the selection of stable landmarks (paper Sec 3–4).
+
+For a fitted planar region with a free edge in view:
+
+1. :func:`search_boundary` — Sec 3.2: in the search window around the predicted edge, the boundary
+   pixels of the region (the outermost region pixel of each row) are compared with every candidate
+   column; the column of least variance is the boundary, that variance its uncertainty. A boundary
+   inside the outermost member segment is moved to it. Done in both images, triangulated and
+   constrained to the fitted plane (Eqs 12–14): ``P_b, Σ_Pb``.
+2. :func:`model_features` — each member segment pair is triangulated (Sec 2.3.1), constrained to the
+   plane (Eqs 12–14) and expressed relative to the boundary, ``d_p = (P_f − P_b)·t``; its map position is
+   ``P = P_M + d_p t`` (Eq 15, ``t`` the wall's direction from the matched free edge) with the rank-1
+   covariance ``Σ_P = (σ_b² + σ_f²) t tᵀ`` (Eq 17): zero across the wall.
+3. :func:`select` — Sec 4: a feature within ``3·sqrt(σ_b² + σ_f²)`` of a visible free edge is near the
+   boundary (DESIGN.md §4 makes the paper's "3σ boundary region" exact this way); a pair with length
+   similarity ``ℓ_s`` (Eq 18) below the threshold is unstable. Every rejection carries its reason.
+
+All positions are in the map frame [m]; the landmark state handed to the filter is ``s = d_p`` along the
+wall (DESIGN.md §4), and landmarks modelled from one boundary share its variance ``σ_b²``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .geometry import StereoCamera
+from .planes import PlaneConfig, PlaneFit, plane_members
+
+REASON_NEAR_BOUNDARY = "near boundary"
+REASON_LENGTH = "low length similarity"
+REASON_OUTSIDE = "outside the plane"
+
+
+@dataclass(frozen=True)
+class LandmarkConfig:
+    """Selection and modeling thresholds (paper Sec 3.2 and 4)."""
+
+    boundary_sigma: float = 3.0
+    """Near-boundary rule: reject features with ``|d_p| <= boundary_sigma·sqrt(σ_b² + σ_f²)`` (Sec 4)."""
+    min_length_similarity: float = 0.7
+    """Reject pairs with ``ℓ_s`` (Eq 18) below this (Sec 4)."""
+    search_sigma: float = 3.0
+    """Half-width of the boundary search window in σ of the predicted edge column (Eq 6)."""
+    min_boundary_rows: int = 15
+    """Fewer rows reaching the search window than this: no boundary found in that image."""
+    fallback_sigma_px: float = 3.0
+    """Column σ used for the right image when its boundary cannot be searched."""
+
+
+@dataclass(frozen=True)
+class Boundary:
+    """A plane's free edge found in the images (Sec 3.2), constrained to the fitted plane.
+
+    ``u`` (2,) columns in the left and right image [px], ``sigma_u`` (2,) their σ [px], ``P`` (2,) the
+    constrained boundary position ``P_b`` in the map frame [m], ``cov`` (2, 2) ``Σ_Pb`` [m²], ``sigma_along``
+    its σ along the wall [m]; ``snapped`` when moved to the outermost member segment; ``rows`` the
+    number of image rows that entered the left search; ``inward`` (2,) the wall's unit direction from
+    this edge into the wall.
+    """
+
+    plane_id: str
+    edge: str
+    u: np.ndarray
+    sigma_u: np.ndarray
+    P: np.ndarray
+    cov: np.ndarray
+    sigma_along: float
+    snapped: bool
+    rows: int
+    inward: np.ndarray
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A feature on a reference plane, modelled relative to the plane's free edge (Table 1's rows).
+
+    Attributes
+    ----------
+    plane_id, plane_label : the wall.
+    index : 1-based rank by distance from the free edge (Table 1's ``index``).
+    pair : index of the segment pair in the frame's pairs.
+    edge : the free edge the feature is measured from (``"p1"`` / ``"p2"``).
+    s : ``d_p``, distance along the wall from that edge [m] (the filter's landmark state).
+    sigma_b, sigma_f : along-wall σ of the boundary and of the feature [m].
+    P : (2,) position in the map (Eq 15) [m]; ``cov`` (2, 2) its rank-1 covariance (Eq 17) [m²].
+    z_low, z_high : heights of the segment's ends [m]; ``length`` = z_high − z_low [m].
+    length_similarity : ``ℓ_s`` (Eq 18).
+    selected, reason : the selection decision and, when rejected, why (Sec 4).
+    P_observed, cov_observed : the plane-constrained triangulated point (Eqs 12–14), map frame.
+    """
+
+    plane_id: str
+    plane_label: str
+    index: int
+    pair: int
+    edge: str
+    s: float
+    sigma_b: float
+    sigma_f: float
+    P: np.ndarray
+    cov: np.ndarray
+    z_low: float
+    z_high: float
+    length_similarity: float
+    u_left: float
+    u_right: float
+    v_top: float
+    v_bottom: float
+    selected: bool = False
+    reason: str = ""
+    P_observed: np.ndarray = field(default_factory=lambda: np.zeros(2), repr=False)
+    cov_observed: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)), repr=False)
+
+    @property
+    def sigma_s(self) -> float:
+        """σ of ``s`` along the wall: ``sqrt(σ_b² + σ_f²)`` (Eq 17) [m]."""
+        return float(np.hypot(self.sigma_b, self.sigma_f))
+
+    @property
+    def length(self) -> float:
+        return self.z_high - self.z_low
+
+
+def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per row, the outermost region pixel inside columns ``[lo, hi]`` (``outward`` −1: leftmost, +1: rightmost).
+
+    Returns rows and their boundary columns; rows whose region does not reach into the window are left out.
+    """
+    W = region.shape[1]
+    c0 = int(np.clip(np.floor(lo), 0, W - 1))
+    c1 = int(np.clip(np.ceil(hi), 0, W - 1))
+    if c1 < c0:
+        return np.zeros(0, int), np.zeros(0)
+    sub = region[:, c0 : c1 + 1]
+    has = sub.any(axis=1)
+    rows = np.flatnonzero(has)
+    if outward < 0:
+        cols = c0 + np.argmax(sub[rows], axis=1)
+    else:
+        cols = c1 - np.argmax(sub[rows, ::-1], axis=1)
+    return rows, cols.astype(float)
+
+
+def minimum_variance_column(cols: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
+    """Sec 3.2: for every candidate column ``m`` in ``[lo, hi]`` take the variance of the boundary
+    pixels about ``m``, ``mean((b − m)²)``; return the column of least variance and that variance [px²].
+
+    The minimum of ``mean((b − m)²)`` over ``m`` is at the mean of ``b``; the search over integer columns
+    is kept (it respects the window) and refined to the mean when the mean lies inside it.
+    """
+    cand = np.arange(np.ceil(lo), np.floor(hi) + 1.0)
+    if len(cand) == 0:
+        cand = np.array([0.5 * (lo + hi)])
+    var = ((cols[None, :] - cand[:, None]) ** 2).mean(axis=1)
+    m = float(cand[int(np.argmin(var))])
+    mean = float(cols.mean())
+    if lo <= mean <= hi:
+        m = mean
+    return m, float(((cols - m) ** 2).mean())
+
+
+def right_region(prediction, disparity_right: np.ndarray, row_margin: float = 0.0) -> np.ndarray:
+    """The plane's pixels in the right image: right-reference disparities inside the plane's band.
+
+    A right pixel ``x`` with disparity ``d`` sees the left column ``x + d``, where the band is tested.
+    """
+    H, W = disparity_right.shape
+    xs = np.arange(W, dtype=float)[None, :]
+    with np.errstate(invalid="ignore"):
+        u_left = xs + disparity_right
+        d_pred = np.interp(u_left, prediction.columns, prediction.d, left=np.nan, right=np.nan)
+        s_pred = np.interp(u_left, prediction.columns, prediction.sigma_d, left=np.nan, right=np.nan)
+        ok = np.abs(disparity_right - d_pred) <= prediction.gate * s_pred
+        vt = np.interp(u_left, prediction.columns, prediction.v_top)
+        vb = np.interp(u_left, prediction.columns, prediction.v_bottom)
+    rows = np.arange(H, dtype=float)[:, None]
+    return ok & (rows >= vt - row_margin) & (rows <= vb + row_margin)
+
+
+def search_boundary(
+    camera: StereoCamera,
+    fit: PlaneFit,
+    edge: str,
+    disparity_right: np.ndarray | None,
+    members_u: np.ndarray,
+    config: LandmarkConfig = LandmarkConfig(),
+    plane_config: PlaneConfig = PlaneConfig(),
+) -> Boundary | None:
+    """Find a free edge of a fitted plane in both images (Sec 3.2) → ``P_b, Σ_Pb`` on the plane.
+
+    ``members_u`` (k, 2): left and right columns of the plane's member segment pairs, for the rule that
+    a boundary found inside the outermost segment is moved to it. Returns None when the region does not
+    reach the search window in the left image.
+    """
+    pred = fit.prediction
+    plane = fit.plane
+    e = pred.edges[edge]
+    X = fit.X
+    # Which way is "outward" in each image: from a point inside the wall towards the edge.
+    inner = plane.point_at(np.array([min(0.3, 0.5 * plane.length)]), edge)[0]
+    u_inner = camera.project_columns(X, inner)
+    u_b = np.zeros(2)
+    var_b = np.zeros(2)
+    rows_used = 0
+    snapped = False
+    regions = [fit.region, None]
+    if disparity_right is not None:
+        regions[1] = right_region(pred, disparity_right, plane_config.row_margin_px)
+    for img in (0, 1):
+        outward = -1 if e.u[img] < u_inner[img] else 1
+        lo, hi = e.window(img, config.search_sigma)
+        if regions[img] is None:
+            rows, cols = np.zeros(0, int), np.zeros(0)
+        else:
+            rows, cols = _boundary_columns(regions[img], lo, hi, outward)
+        if len(rows) < config.min_boundary_rows:
+            if img == 0:
+                return None
+            # right image unusable: take the column where the fitted plane puts the left boundary
+            d_here, _ = pred.disparity_at(u_b[0])
+            u_b[1] = u_b[0] - float(d_here)
+            var_b[1] = config.fallback_sigma_px**2
+            continue
+        m, var = minimum_variance_column(cols, lo, hi)
+        if img == 0:
+            rows_used = len(rows)
+        # A boundary placed inside the outermost segment of the region is moved to that segment.
+        if len(members_u):
+            outer = members_u[:, img].min() if outward < 0 else members_u[:, img].max()
+            if (outward < 0 and m > outer) or (outward > 0 and m < outer):
+                m, snapped = float(outer), True
+        u_b[img] = m
+        var_b[img] = var + camera.sigma_img**2
+    sigma_u = np.sqrt(var_b)
+    P, cov = camera.triangulate(u_b[0], u_b[1], X, sigma_img=sigma_u)
+    if not np.all(np.isfinite(P)):
+        # non-positive disparity from two independent searches: intersect the left ray with the plane
+        d_here, _ = pred.disparity_at(u_b[0])
+        u_b[1] = u_b[0] - float(d_here)
+        P, cov = camera.triangulate(u_b[0], u_b[1], X, sigma_img=sigma_u)
+    P_hat, cov_hat = fit.fuse_point(P, cov)
+    t = _inward(plane, edge)
+    sigma_along = float(np.sqrt(t @ cov_hat @ t))
+    return Boundary(plane.id, edge, u_b, sigma_u, P_hat, cov_hat, sigma_along, snapped, rows_used, t)
+
+
+def model_features(
+    camera: StereoCamera,
+    fit: PlaneFit,
+    boundary: Boundary,
+    pairs,
+    member_idx: np.ndarray,
+) -> list[Candidate]:
+    """Relative model of the plane's member pairs w.r.t. the boundary (Eqs 12–17), ranked from the edge."""
+    plane = fit.plane
+    X = fit.X
+    edge = boundary.edge
+    t = _inward(plane, edge)
+    P_edge = plane.edge(edge)
+    out = []
+    for k in member_idx:
+        k = int(k)
+        P_f, cov_f = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
+        if not np.all(np.isfinite(P_f)):
+            continue
+        P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
+        d_p = float((P_hat - boundary.P) @ t)
+        sigma_f = float(np.sqrt(t @ cov_hat @ t))
+        var_s = boundary.sigma_along**2 + sigma_f**2
+        P = P_edge + d_p * t  # Eq 15
+        cov = var_s * np.outer(t, t)  # Eq 17: rank 1 along the wall
+        Zc = camera.to_camera(X, P_hat)[1]
+        z_high = float(camera.heights(pairs.v_top[k], Zc))
+        z_low = float(camera.heights(pairs.v_bottom[k], Zc))
+        out.append(
+            Candidate(plane.id, plane.label, 0, k, edge, d_p, boundary.sigma_along, sigma_f, P, cov, z_low, z_high,
+                      float(pairs.length_similarity[k]), float(pairs.u_left[k]), float(pairs.u_right[k]),
+                      float(pairs.v_top[k]), float(pairs.v_bottom[k]), P_observed=P_hat, cov_observed=cov_hat)
+        )
+    out.sort(key=lambda c: c.s)
+    return [_replace(c, index=i + 1) for i, c in enumerate(out)]
+
+
+def select(candidates: list[Candidate], boundaries: list[Boundary], config: LandmarkConfig = LandmarkConfig()):
+    """Sec 4: the near-boundary 3σ rule against every visible free edge, then length similarity (Eq 18)."""
+    out = []
+    for c in candidates:
+        reason = ""
+        for b in boundaries:
+            if b.plane_id != c.plane_id:
+                continue
+            if b.edge == c.edge:
+                dist = c.s
+            else:  # the wall's other free edge, also in view: distance inward from it
+                dist = float((c.P_observed - b.P) @ b.inward)
+            sigma_b = b.sigma_along
+            if dist < -config.boundary_sigma * np.hypot(sigma_b, c.sigma_f):
+                reason = REASON_OUTSIDE
+                break
+            if abs(dist) <= config.boundary_sigma * np.hypot(sigma_b, c.sigma_f):
+                reason = REASON_NEAR_BOUNDARY
+                break
+        if not reason and c.length_similarity < config.min_length_similarity:
+            reason = REASON_LENGTH
+        out.append(_replace(c, selected=not reason, reason=reason))
+    return out
+
+
+def _replace(c: Candidate, **kw) -> Candidate:
+    return replace(c, **kw)
+
+
+def _inward(plane, edge: str) -> np.ndarray:
+    """Unit direction along the wall from ``edge`` into the wall."""
+    return plane.direction if edge == "p1" else -plane.direction
+
+
+@dataclass(frozen=True)
+class PlaneLandmarks:
+    """Everything modelled on one plane in one frame."""
+
+    fit: PlaneFit
+    boundaries: list[Boundary]
+    members: np.ndarray
+    candidates: list[Candidate]
+
+
+def landmarks_on_plane(
+    camera: StereoCamera,
+    fit: PlaneFit,
+    pairs,
+    left_segments,
+    disparity_right: np.ndarray | None,
+    config: LandmarkConfig = LandmarkConfig(),
+    plane_config: PlaneConfig = PlaneConfig(),
+) -> PlaneLandmarks:
+    """Members, boundary search at every free edge in the window, relative model and selection."""
+    members = plane_members(fit, pairs, left_segments, plane_config)
+    idx = np.flatnonzero(members)
+    members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
+    boundaries = []
+    for edge in fit.plane.free_edges:
+        e = fit.prediction.edges[edge]
+        lo, hi = e.window(0, config.search_sigma)
+        if hi < 0 or lo > camera.width - 1:
+            continue
+        b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config)
+        if b is not None:
+            boundaries.append(b)
+    if not boundaries:
+        return PlaneLandmarks(fit, [], members, [])
+    ref = min(boundaries, key=lambda b: b.sigma_along)
+    cands = model_features(camera, fit, ref, pairs, idx)
+    return PlaneLandmarks(fit, boundaries, members, select(cands, boundaries, config))

@@ -1,0 +1,74 @@
+"""Writing per-frame landmark results: ``landmarks.csv`` and ``landmarks.json`` (metres, map frame)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+LANDMARK_COLUMNS = (
+    "plane", "index", "x", "y", "z_low", "z_high", "length", "sigma_x", "sigma_y",
+    "length_similarity", "selected", "reason",
+)
+"""The columns of ``landmarks.csv`` (issue contract); metres, map frame."""
+
+
+def candidate_row(c) -> dict:
+    """One :class:`~stablemarks.landmarks.Candidate` as a row of ``landmarks.csv``."""
+    return {
+        "plane": c.plane_id,
+        "index": c.index,
+        "x": float(c.P[0]),
+        "y": float(c.P[1]),
+        "z_low": c.z_low,
+        "z_high": c.z_high,
+        "length": c.length,
+        "sigma_x": float(np.sqrt(max(c.cov[0, 0], 0.0))),
+        "sigma_y": float(np.sqrt(max(c.cov[1, 1], 0.0))),
+        "length_similarity": c.length_similarity,
+        "selected": bool(c.selected),
+        "reason": c.reason,
+    }
+
+
+def candidate_record(c) -> dict:
+    """The JSON record: the CSV row plus the model's details (edge, d_p, σ_b, σ_f, covariance, image columns)."""
+    row = candidate_row(c)
+    row.update(
+        plane_label=c.plane_label,
+        edge=c.edge,
+        s=c.s,
+        sigma_s=c.sigma_s,
+        sigma_boundary=c.sigma_b,
+        sigma_feature=c.sigma_f,
+        cov=np.asarray(c.cov).tolist(),
+        u_left=c.u_left,
+        u_right=c.u_right,
+        v_top=c.v_top,
+        v_bottom=c.v_bottom,
+    )
+    return row
+
+
+def write_landmarks(out_dir: str | Path, candidates, extra: dict | None = None) -> tuple[Path, Path]:
+    """Write ``landmarks.csv`` and ``landmarks.json`` (one row/record per candidate feature)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path, json_path = out / "landmarks.csv", out / "landmarks.json"
+    rows = [candidate_row(c) for c in candidates]
+    tmp = csv_path.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=LANDMARK_COLUMNS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6f}" if isinstance(v, float) else v) for k, v in r.items()})
+    tmp.replace(csv_path)
+    doc = {"units": "m", "frame": "map", "landmarks": [candidate_record(c) for c in candidates]}
+    if extra:
+        doc.update(extra)
+    tmp = json_path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(doc, indent=2))
+    tmp.replace(json_path)
+    return csv_path, json_path

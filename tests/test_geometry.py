@@ -184,3 +184,9 @@ def test_triangulation_with_separate_column_sigmas():
     _, cov_left_only = cam.triangulate(uv[0], uv[1], X, sigma_img=np.array([2.0, 0.0]))
     _, cov_right_only = cam.triangulate(uv[0], uv[1], X, sigma_img=np.array([0.0, 2.0]))
     np.testing.assert_allclose(cov_left_only + cov_right_only, cov_equal)
+
+    _, cov_full = cam.triangulate(uv[0], uv[1], X, cov_uv=np.diag([4.0, 4.0]))
+    np.testing.assert_allclose(cov_full, cov_equal)
+    # fully correlated columns (same shift in both images): disparity unchanged, depth error vanishes
+    _, cov_corr = cam.triangulate(uv[0], uv[1], X, cov_uv=4.0 * np.ones((2, 2)))
+    assert cov_corr[1, 1] < 1e-3 * cov_equal[1, 1]

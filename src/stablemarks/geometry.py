@@ -305,7 +305,7 @@ class StereoCamera:
         return np.sqrt(var + 2.0 * self.sigma_img**2)
 
     # ----------------------------------------------------------- triangulation
-    def triangulate(self, u_l, u_r, X=None, cov_X=None, *, sigma_img=None):
+    def triangulate(self, u_l, u_r, X=None, cov_X=None, *, sigma_img=None, cov_uv=None):
         """Triangulate image columns ``(u_l, u_r)`` into points on the floor plane with covariance.
 
         Parameters
@@ -315,6 +315,8 @@ class StereoCamera:
         cov_X : (3, 3) pose covariance over ``(x, y, theta)``, added to the result when given.
         sigma_img : column standard deviation [px] (default: the camera's ``sigma_img``, Sec 2.3.1); a scalar
             for both images or ``(..., 2)`` for ``(σ_l, σ_r)`` separately (e.g. a searched boundary, Sec 3.2).
+        cov_uv : (..., 2, 2) full covariance of ``(u_l, u_r)`` [px²], for correlated columns; overrides
+            ``sigma_img``.
 
         Returns
         -------
@@ -338,6 +340,8 @@ class StereoCamera:
         dX_dur = (u_l - self.cu) * dZ_dur / self.f
         J_c_u = np.stack([np.stack([dX_dul, dX_dur], -1), np.stack([dZ_dul, dZ_dur], -1)], -2)
         def propagate(J):
+            if cov_uv is not None:
+                return J @ np.asarray(cov_uv, dtype=float) @ np.swapaxes(J, -1, -2)
             if var_uv is None:
                 return s_img**2 * J @ np.swapaxes(J, -1, -2)
             return (J * var_uv[..., None, :]) @ np.swapaxes(J, -1, -2)

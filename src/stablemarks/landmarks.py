@@ -11,8 +11,9 @@ For a fitted planar region with a free edge in view:
    plane (Eqs 12–14) and expressed relative to the boundary, ``d_p = (P_f − P_b)·t``; its map position is
    ``P = P_M + d_p t`` (Eq 15, ``t`` the wall's direction from the matched free edge) with the rank-1
    covariance ``Σ_P = (σ_b² + σ_f²) t tᵀ`` (Eq 17): zero across the wall.
-3. :func:`select` — Sec 4: a feature within ``3·sqrt(σ_b² + σ_f²)`` of a visible free edge is near the
-   boundary (DESIGN.md §4 makes the paper's "3σ boundary region" exact this way); a pair with length
+3. :func:`select` — Sec 4: a feature whose 3σ interval along the wall touches the 3σ region of a visible
+   free edge, ``|d_p| <= 3 (σ_b + σ_f)``, is near the boundary (the paper's "3σ boundary region" made
+   exact; ``boundary_rule="combined"`` gives DESIGN.md §4's ``3·sqrt(σ_b² + σ_f²)``); a pair with length
    similarity ``ℓ_s`` (Eq 18) below the threshold is unstable. Every rejection carries its reason.
 
 All positions are in the map frame [m]; the landmark state handed to the filter is ``s = d_p`` along the
@@ -25,6 +26,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .errors import InputError, expected
 from .geometry import StereoCamera
 from .planes import PlaneConfig, PlaneFit, plane_members
 
@@ -37,8 +39,21 @@ REASON_OUTSIDE = "outside the plane"
 class LandmarkConfig:
     """Selection and modeling thresholds (paper Sec 3.2 and 4)."""
 
+    def __post_init__(self) -> None:
+        if self.boundary_rule not in ("disjoint", "combined"):
+            raise InputError(expected("'disjoint' or 'combined'", self.boundary_rule, where="landmarks.boundary_rule"))
+        if not 0.0 <= self.min_length_similarity <= 1.0:
+            raise InputError(expected("a number in [0, 1]", self.min_length_similarity,
+                                      where="landmarks.min_length_similarity"))
+
     boundary_sigma: float = 3.0
-    """Near-boundary rule: reject features with ``|d_p| <= boundary_sigma·sqrt(σ_b² + σ_f²)`` (Sec 4)."""
+    """Width of the unstable boundary region and of the feature's interval, in σ (Sec 4)."""
+    boundary_rule: str = "disjoint"
+    """How the near-boundary test combines the boundary's and the feature's σ along the wall (Sec 4):
+    ``disjoint`` rejects a feature whose ``k``σ interval touches the boundary's ``k``σ region,
+    ``|d_p| <= k (σ_b + σ_f)``; ``combined`` rejects ``|d_p| <= k sqrt(σ_b² + σ_f²)`` (DESIGN.md §4).
+    With Table 1's own figures (partition 2: d_p = 109.4 mm, σ = 35.0 mm) only ``disjoint`` reproduces the
+    paper's rejection."""
     min_length_similarity: float = 0.7
     """Reject pairs with ``ℓ_s`` (Eq 18) below this (Sec 4)."""
     search_sigma: float = 3.0
@@ -47,6 +62,13 @@ class LandmarkConfig:
     """Fewer rows reaching the search window than this: no boundary found in that image."""
     fallback_sigma_px: float = 3.0
     """Column σ used for the right image when its boundary cannot be searched."""
+    row_outlier_mad: float = 3.0
+    """Rows whose boundary column is farther than this many robust σ (1.4826·MAD) from the median are not
+    the plane's edge (e.g. floor pixels at the wall's foot that share its depth) and are left out."""
+    boundary_window_px: float | None = None
+    """Width [px] of the area-matching window. A SAD region's border is only known to within the window
+    (block matching spreads a depth edge over it), so the boundary gets the variance of a uniform
+    distribution over that width, ``w²/12``, shared by both images. ``None``: the SAD block size."""
 
 
 @dataclass(frozen=True)
@@ -143,6 +165,15 @@ def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int) ->
     return rows, cols.astype(float)
 
 
+def robust_rows(cols: np.ndarray, k: float) -> np.ndarray:
+    """Mask of boundary columns within ``k`` robust σ (1.4826·MAD, at least 1 px) of their median."""
+    if len(cols) == 0:
+        return np.zeros(0, dtype=bool)
+    med = float(np.median(cols))
+    scale = max(1.0, 1.4826 * float(np.median(np.abs(cols - med))))
+    return np.abs(cols - med) <= k * scale
+
+
 def minimum_variance_column(cols: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
     """Sec 3.2: for every candidate column ``m`` in ``[lo, hi]`` take the variance of the boundary
     pixels about ``m``, ``mean((b − m)²)``; return the column of least variance and that variance [px²].
@@ -187,13 +218,16 @@ def search_boundary(
     members_u: np.ndarray,
     config: LandmarkConfig = LandmarkConfig(),
     plane_config: PlaneConfig = PlaneConfig(),
+    window_px: float = 15.0,
 ) -> Boundary | None:
     """Find a free edge of a fitted plane in both images (Sec 3.2) → ``P_b, Σ_Pb`` on the plane.
 
     ``members_u`` (k, 2): left and right columns of the plane's member segment pairs, for the rule that
     a boundary found inside the outermost segment is moved to it. Returns None when the region does not
-    reach the search window in the left image.
+    reach the search window in the left image. ``window_px``: the SAD window width used when
+    ``config.boundary_window_px`` is None.
     """
+    w = config.boundary_window_px if config.boundary_window_px is not None else window_px
     pred = fit.prediction
     plane = fit.plane
     e = pred.edges[edge]
@@ -215,6 +249,8 @@ def search_boundary(
             rows, cols = np.zeros(0, int), np.zeros(0)
         else:
             rows, cols = _boundary_columns(regions[img], lo, hi, outward)
+            keep = robust_rows(cols, config.row_outlier_mad)
+            rows, cols = rows[keep], cols[keep]
         if len(rows) < config.min_boundary_rows:
             if img == 0:
                 return None
@@ -233,13 +269,17 @@ def search_boundary(
                 m, snapped = float(outer), True
         u_b[img] = m
         var_b[img] = var + camera.sigma_img**2
-    sigma_u = np.sqrt(var_b)
-    P, cov = camera.triangulate(u_b[0], u_b[1], X, sigma_img=sigma_u)
+    # The window term is one physical effect seen by both disparity images (the window straddling the
+    # depth edge shifts the region's border the same way in 3D): it is shared, fully correlated.
+    var_w = w**2 / 12.0
+    cov_uv = np.diag(var_b) + var_w
+    sigma_u = np.sqrt(np.diag(cov_uv))
+    P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
     if not np.all(np.isfinite(P)):
         # non-positive disparity from two independent searches: intersect the left ray with the plane
         d_here, _ = pred.disparity_at(u_b[0])
         u_b[1] = u_b[0] - float(d_here)
-        P, cov = camera.triangulate(u_b[0], u_b[1], X, sigma_img=sigma_u)
+        P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
     P_hat, cov_hat = fit.fuse_point(P, cov)
     t = _inward(plane, edge)
     sigma_along = float(np.sqrt(t @ cov_hat @ t))
@@ -296,10 +336,14 @@ def select(candidates: list[Candidate], boundaries: list[Boundary], config: Land
             else:  # the wall's other free edge, also in view: distance inward from it
                 dist = float((c.P_observed - b.P) @ b.inward)
             sigma_b = b.sigma_along
-            if dist < -config.boundary_sigma * np.hypot(sigma_b, c.sigma_f):
+            if config.boundary_rule == "combined":
+                margin = config.boundary_sigma * np.hypot(sigma_b, c.sigma_f)
+            else:
+                margin = config.boundary_sigma * (sigma_b + c.sigma_f)
+            if dist < -margin:
                 reason = REASON_OUTSIDE
                 break
-            if abs(dist) <= config.boundary_sigma * np.hypot(sigma_b, c.sigma_f):
+            if abs(dist) <= margin:
                 reason = REASON_NEAR_BOUNDARY
                 break
         if not reason and c.length_similarity < config.min_length_similarity:
@@ -335,6 +379,7 @@ def landmarks_on_plane(
     disparity_right: np.ndarray | None,
     config: LandmarkConfig = LandmarkConfig(),
     plane_config: PlaneConfig = PlaneConfig(),
+    window_px: float = 15.0,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection."""
     members = plane_members(fit, pairs, left_segments, plane_config)
@@ -346,7 +391,7 @@ def landmarks_on_plane(
         lo, hi = e.window(0, config.search_sigma)
         if hi < 0 or lo > camera.width - 1:
             continue
-        b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config)
+        b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px)
         if b is not None:
             boundaries.append(b)
     if not boundaries:

@@ -1,0 +1,68 @@
+"""Helpers shared by the sub-commands: argument parsing of poses and loading the camera."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, expected
+
+
+def parse_triplet(text: str, what: str, option: str) -> np.ndarray:
+    """``"X,Y,THETA"`` → (3,) floats; the angle in radians, or in degrees with a ``deg`` suffix."""
+    parts = [p.strip() for p in str(text).split(",")]
+    if len(parts) != 3:
+        raise InputError(expected(f"{what} as three comma-separated numbers", text, where=option))
+    out = []
+    for i, p in enumerate(parts):
+        scale = 1.0
+        if i == 2 and p.lower().endswith("deg"):
+            p, scale = p[:-3], np.pi / 180.0
+        try:
+            v = float(p) * scale
+        except ValueError:
+            raise InputError(expected(f"{what} as three comma-separated numbers", text, where=option)) from None
+        if not np.isfinite(v):
+            raise InputError(expected("finite numbers", text, where=option))
+        out.append(v)
+    return np.array(out)
+
+
+def pose_prior(pose: str, sigma: str) -> tuple[np.ndarray, np.ndarray]:
+    """``--pose`` and ``--pose-sigma`` → pose (3,) and its diagonal covariance (3, 3)."""
+    X = parse_triplet(pose, "x [m], y [m], theta [rad, or e.g. 90deg]", "--pose")
+    s = parse_triplet(sigma, "σx [m], σy [m], σθ [rad, or e.g. 2deg]", "--pose-sigma")
+    if np.any(s < 0):
+        raise InputError(expected("non-negative standard deviations", sigma, where="--pose-sigma"))
+    return X, np.diag(np.maximum(s, 1e-9) ** 2)
+
+
+def load_camera(calib: str | None, mount_path: str | None, near: str | Path):
+    """The StereoCamera and the calibration: from ``--calib DIR|FILE`` (or a ``left.yaml``/``right.yaml``
+    pair next to the images) and the mount from ``--camera MOUNT.yaml`` (or ``mount.yaml`` beside the
+    calibration; otherwise the default mount)."""
+    from ..io.calibration import Mount, load_calibration, load_mount
+
+    if calib is None:
+        here = Path(near).parent
+        if (here / "left.yaml").exists() and (here / "right.yaml").exists():
+            calib = str(here)
+        else:
+            raise InputError(
+                f"no calibration: pass --calib DIR (a left.yaml/right.yaml camera_info pair or an OpenCV "
+                f"stereo file); none found next to {near}"
+            )
+    calibration = load_calibration(calib)
+    if mount_path is None:
+        beside = Path(calib) / "mount.yaml" if Path(calib).is_dir() else Path(calib).parent / "mount.yaml"
+        mount = load_mount(beside) if beside.exists() else Mount()
+    else:
+        mount = load_mount(mount_path)
+    return calibration.stereo_camera(mount), calibration
+
+
+def out_dir_arg(parser: argparse.ArgumentParser, default: str | None = None) -> None:
+    parser.add_argument("--out", required=default is None, default=default, metavar="DIR",
+                        help="output folder (created if missing)")

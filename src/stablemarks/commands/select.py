@@ -1,0 +1,73 @@
+"""``stablemarks select``: landmark modeling and selection on one stereo frame (Table 1, Figs 5–7)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from rich.console import Console
+
+from ._common import load_camera, out_dir_arg, pose_prior
+
+NAME = "select"
+HELP = "model and select landmarks on one stereo frame (prints Table 1, writes landmarks.csv/json, Figs 5-7)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("left", metavar="LEFT", help="left image (rectified, or raw with --calib)")
+    p.add_argument("right", metavar="RIGHT", help="right image")
+    p.add_argument("--map", required=True, metavar="MAP", help="map of walls (YAML, see README)")
+    p.add_argument("--pose", required=True, metavar="X,Y,THETA",
+                   help="robot pose prior in the map: metres and radians (or e.g. 90deg)")
+    p.add_argument("--pose-sigma", required=True, metavar="SX,SY,STHETA",
+                   help="standard deviations of the pose prior (metres, radians or e.g. 2deg)")
+    p.add_argument("--calib", metavar="DIR", help="calibration: left.yaml/right.yaml pair or OpenCV file "
+                   "(default: a pair next to LEFT)")
+    p.add_argument("--camera", metavar="MOUNT.yaml", help="camera mounting on the robot (offset, height, pan)")
+    p.add_argument("--pan", type=float, default=None, metavar="RAD", help="head pan for this frame [rad]")
+    p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README)")
+    p.add_argument("--mm", action="store_true", help="print the table in millimetres like the paper")
+    p.add_argument("--no-figures", action="store_true", help="skip the pictures")
+    out_dir_arg(p)
+
+
+def run(args) -> int:
+    from ..config import load_config
+    from ..io.images import load_stereo_pair
+    from ..io.results import write_landmarks
+    from ..maps import load_map
+    from ..pipeline import process_frame
+    from ._tables import landmark_table
+
+    console = Console()
+    config = load_config(args.config)
+    world_map = load_map(args.map)
+    X, cov_X = pose_prior(args.pose, args.pose_sigma)
+    camera, calibration = load_camera(args.calib, args.camera, args.left)
+    if args.pan is not None:
+        camera = camera.with_pan(args.pan)
+    left, right = load_stereo_pair(args.left, args.right, calibration)
+    result = process_frame(left, right, camera, world_map, X, cov_X, config)
+    out = Path(args.out)
+    write_landmarks(out, result.candidates, extra={"pose": X.tolist(), "cov_pose": cov_X.tolist(),
+                                                    "warnings": result.warnings})
+    for w in result.warnings:
+        console.print(f"[yellow]warning:[/] {w}")
+    console.print(landmark_table(result.candidates, mm=args.mm))
+    if not args.no_figures:
+        write_frame_figures(out, left, right, result, world_map, camera)
+    console.print(f"wrote {out / 'landmarks.csv'} and {out / 'landmarks.json'}"
+                  + ("" if args.no_figures else ", fig5_segments.png, fig6_planes.png, fig7_uncertainty.png"))
+    (out / "timings.json").write_text(json.dumps({**result.front.timings, **result.timings}, indent=2))
+    return 0
+
+
+def write_frame_figures(out: Path, left, right, result, world_map, camera, truth=None) -> None:
+    from ..viz.frames import figure5, figure6, figure7, zoom_figure7
+
+    figure5(out / "fig5_segments.png", left, right, result.front)
+    figure6(out / "fig6_planes.png", left, result)
+    figure7(out / "fig7_uncertainty.png", result, world_map, camera, truth)
+    if result.candidates:
+        zoom_figure7(out / "fig7_along_walls.png", result, sorted({c.plane_id for c in result.candidates}))

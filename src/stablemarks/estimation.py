@@ -1,0 +1,834 @@
+"""The joint EKF over the robot pose and the landmarks (paper Sec 5, Eqs 19–20; DESIGN.md §4).
+
+State ``S = (X, l_1 … l_n)`` in the map frame: the robot pose ``X = (x [m], y [m], theta [rad])`` followed by
+the landmarks, each of one of two kinds:
+
+- ``wall``: one number ``s`` [m], the distance along a known wall from its free edge ``edge`` (``"p1"`` or
+  ``"p2"``); the landmark stands at ``P = plane.point_at(s, edge)`` (Eq 15 with ``s = d_p``). Its 2-D
+  covariance for output is rank 1 along the wall, ``var_s · t tᵀ`` with ``t`` the unit direction from that
+  edge (Eq 17, Table 1's ``σ_y = 0``), while the filter's covariance stays non-singular.
+- ``point``: ``(x, y)`` [m], a vertical line on no known wall (the ``all_segments`` baseline).
+
+Prediction (Eq 19) composes the pose with an odometry increment given in the robot frame, ``X' = X ⊕ U``,
+and touches only the pose rows and columns of the covariance: O(n). The observation of a landmark (Eq 20,
+the explicit form of ``G(S, L) = 0``) is the pair of image columns ``(u_l, u_r)`` [px] of its vertical line
+seen from the pose, with the stereo head panned by the frame's ``pan`` [rad], and noise ``R = σ_img² I``.
+An update stacks the frame's observations and uses the Joseph form restricted to the columns they touch,
+``P − K PHtᵀ − PHt Kᵀ + K S Kᵀ`` with ``PHt = P[:, idx] H_subᵀ``: O(N²·m) for N state dimensions and m
+observations, never O(N³).
+
+Threads: the update's products are thin in one dimension (2m ≈ 12); on such shapes a multi-threaded BLAS
+was measured several times slower than one thread (DESIGN §4; 60 ms against 12 ms for 1000 landmarks
+on the 2-core development machine under load). :meth:`JointEKF.update` therefore pins BLAS to one thread
+around its O(N²) part when the state has at least ``BLAS_PIN_MIN_DIM`` dimensions, through one
+process-wide ``threadpoolctl.ThreadpoolController`` (entering its limit costs ~0.1 ms; a fresh
+``threadpool_limits`` call costs ~5 ms, more than a small update). The limit is process-wide while it
+lasts. Callers running many filter steps may as well wrap their whole loop::
+
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(limits=1, user_api="blas"):
+        ...  # predict / associate / update
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy as _copy
+import functools
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
+from threadpoolctl import ThreadpoolController
+
+from .errors import ConfigError, GeometryError, InputError, expected
+from .geometry import SE2, SIGMA_IMG, StereoCamera, wrap_angle
+from .maps import Map, ReferencePlane
+
+KINDS = ("wall", "point")
+EDGES = ("p1", "p2")
+BLAS_PIN_MIN_DIM = 256
+"""State size from which :meth:`JointEKF.update` pins BLAS to one thread (module docstring)."""
+
+
+@functools.cache
+def _blas_controller() -> ThreadpoolController:
+    return ThreadpoolController()
+
+
+def _one_blas_thread(n_dims: int):
+    """A context pinning BLAS to one thread for a state of ``n_dims`` dimensions (no-op below the threshold)."""
+    if n_dims < BLAS_PIN_MIN_DIM:
+        return contextlib.nullcontext()
+    return _blas_controller().limit(limits=1, user_api="blas")
+
+
+# ------------------------------------------------------------------ motion
+def motion(X, U, *, jacobians: bool = False):
+    """Compose the pose with an odometry increment: ``X' = X ⊕ U`` (paper Eq 19).
+
+    Parameters
+    ----------
+    X : (3,) pose ``(x [m], y [m], theta [rad])`` of the robot in the map frame.
+    U : (3,) increment ``(dx [m], dy [m], dtheta [rad])`` in the robot frame at ``X``.
+    jacobians : also return ``J_X`` (3, 3) = ∂X'/∂X and ``J_U`` (3, 3) = ∂X'/∂U.
+
+    Returns
+    -------
+    X' : (3,) new pose, heading wrapped to ``[-pi, pi)``.
+    """
+    X = np.asarray(X, dtype=float)
+    U = np.asarray(U, dtype=float)
+    c, s = np.cos(X[2]), np.sin(X[2])
+    X_new = np.array([X[0] + c * U[0] - s * U[1], X[1] + s * U[0] + c * U[1], wrap_angle(X[2] + U[2])])
+    if not jacobians:
+        return X_new
+    J_X = np.array([[1.0, 0.0, -s * U[0] - c * U[1]], [0.0, 1.0, c * U[0] - s * U[1]], [0.0, 0.0, 1.0]])
+    J_U = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return X_new, J_X, J_U
+
+
+# ----------------------------------------------------------- configuration
+@dataclass(frozen=True)
+class EKFConfig:
+    """Parameters of :class:`JointEKF`.
+
+    Attributes
+    ----------
+    gate_probability : probability mass of the χ² gate (2 dof) on an association's Mahalanobis distance.
+    max_updates_per_frame : ``k``, how many associated landmarks update the state per frame (the paper's
+        "several, less uncertain landmarks", Sec 5), chosen by :meth:`JointEKF.select_for_update`.
+    sigma_img : column noise of one image [px] (Sec 2.3.1); ``R = sigma_img² I`` per observation.
+    margin_px : a landmark is a candidate for association only if both its predicted columns lie this
+        far inside the image [px].
+    """
+
+    gate_probability: float = 0.99
+    max_updates_per_frame: int = 6
+    sigma_img: float = SIGMA_IMG
+    margin_px: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.gate_probability < 1.0:
+            raise ConfigError(expected("a probability in (0, 1)", self.gate_probability,
+                                       where="ekf.gate_probability"))
+        k = self.max_updates_per_frame
+        if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
+            raise ConfigError(expected("a positive integer", k, where="ekf.max_updates_per_frame"))
+        if not (np.isfinite(self.sigma_img) and self.sigma_img > 0):
+            raise ConfigError(expected("a positive number of pixels", self.sigma_img, where="ekf.sigma_img"))
+        if not (np.isfinite(self.margin_px) and self.margin_px >= 0):
+            raise ConfigError(expected("a non-negative number of pixels", self.margin_px, where="ekf.margin_px"))
+
+    @property
+    def gate(self) -> float:
+        """χ² threshold on the squared Mahalanobis distance of a 2-D innovation."""
+        return float(chi2.ppf(self.gate_probability, 2))
+
+
+# --------------------------------------------------------------- landmarks
+@dataclass(frozen=True)
+class NewLandmark:
+    """A landmark to enter the filter: its kind, initial state value and the data kept beside it.
+
+    ``value`` is ``(s,)`` [m] for a ``wall`` landmark (distance along ``plane`` from ``edge``) and ``(x, y)``
+    [m] in the map frame for a ``point`` landmark. ``z_low, z_high`` [m] are the line's ends (Eq 1), kept for
+    matching and output only. Build with :meth:`wall` or :meth:`point`.
+    """
+
+    kind: str
+    value: tuple[float, ...]
+    plane: ReferencePlane | None = None
+    edge: str = "p1"
+    z_low: float | None = None
+    z_high: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise InputError(expected(f"one of {KINDS}", self.kind, where="landmark.kind"))
+        n = 1 if self.kind == "wall" else 2
+        if len(self.value) != n or not all(np.isfinite(self.value)):
+            raise InputError(expected(f"{n} finite number(s)", self.value, where=f"{self.kind} landmark.value"))
+        if self.kind == "wall":
+            if not isinstance(self.plane, ReferencePlane):
+                raise InputError(expected("a ReferencePlane", self.plane, where="wall landmark.plane"))
+            if self.edge not in EDGES:
+                raise InputError(expected(f"one of {EDGES}", self.edge, where="wall landmark.edge"))
+
+    @classmethod
+    def wall(cls, plane: ReferencePlane, s: float, edge: str = "p1", z_low: float | None = None,
+             z_high: float | None = None) -> NewLandmark:
+        return cls("wall", (float(s),), plane, edge, z_low, z_high)
+
+    @classmethod
+    def point(cls, xy, z_low: float | None = None, z_high: float | None = None) -> NewLandmark:
+        xy = np.asarray(xy, dtype=float).reshape(-1)
+        return cls("point", tuple(float(v) for v in xy), None, "p1", z_low, z_high)
+
+    @property
+    def dim(self) -> int:
+        """Number of state dimensions (1 for ``wall``, 2 for ``point``)."""
+        return 1 if self.kind == "wall" else 2
+
+
+@dataclass
+class _Track:
+    """The filter's bookkeeping of one landmark (its value and covariance live in the state).
+
+    ``start`` (2,) and ``J_p_l`` (2, 2) give its map position ``P = start + J_p_l @ (l_1, l_2)``: for a wall
+    landmark ``start`` is the edge, the first column the unit direction from it and the second column zero
+    (the state index of ``l_2`` repeats ``l_1``); for a point ``start = 0`` and ``J_p_l = I``.
+    """
+
+    id: int
+    kind: str
+    plane: ReferencePlane | None
+    edge: str
+    z_low: float | None
+    z_high: float | None
+    first_frame: int | None
+    last_frame: int | None
+    n_observed: int = 0
+    start: np.ndarray = field(init=False, repr=False)
+    J_p_l: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.kind == "point":
+            self.start, self.J_p_l = np.zeros(2), np.eye(2)
+        else:
+            t = self.plane.direction if self.edge == "p1" else -self.plane.direction
+            self.start, self.J_p_l = self.plane.edge(self.edge), np.array([[t[0], 0.0], [t[1], 0.0]])
+
+    @property
+    def dim(self) -> int:
+        return 1 if self.kind == "wall" else 2
+
+
+@dataclass(frozen=True, eq=False)
+class LandmarkEstimate:
+    """A snapshot of one landmark of the filter.
+
+    ``value`` is ``(s,)`` or ``(x, y)`` and ``cov`` its (1, 1) or (2, 2) covariance over the state
+    dimensions; ``position`` (2,) [m] and ``cov2d`` (2, 2) [m²] are in the map frame (rank 1 along the wall
+    for a ``wall`` landmark, Eq 17).
+    """
+
+    id: int
+    kind: str
+    plane_id: str | None
+    edge: str | None
+    value: np.ndarray
+    cov: np.ndarray
+    position: np.ndarray
+    cov2d: np.ndarray
+    z_low: float | None
+    z_high: float | None
+    n_observed: int
+    first_frame: int | None
+    last_frame: int | None
+
+    def to_dict(self) -> dict:
+        """Plain JSON/YAML-able fields (see :meth:`JointEKF.landmarks_to_dict`)."""
+        d: dict = {"id": self.id, "kind": self.kind}
+        if self.kind == "wall":
+            d.update(plane=self.plane_id, edge=self.edge, s=float(self.value[0]), var_s=float(self.cov[0, 0]))
+        else:
+            d.update(x=float(self.value[0]), y=float(self.value[1]), cov=self.cov.tolist())
+        def plain(v, kind):
+            return None if v is None else kind(v)
+
+        d.update(position=self.position.tolist(), cov2d=self.cov2d.tolist(), z_low=plain(self.z_low, float),
+                 z_high=plain(self.z_high, float), n_observed=int(self.n_observed),
+                 first_frame=plain(self.first_frame, int), last_frame=plain(self.last_frame, int))
+        return d
+
+
+# ------------------------------------------------------------------ results
+@dataclass(frozen=True, eq=False)
+class ObservationPrediction:
+    """Predicted observations of landmarks ``ids`` (m,) for one pan angle (Eqs 3, 4 and 20).
+
+    Attributes
+    ----------
+    ids : (m,) landmark ids.
+    uv : (m, 2) predicted ``(u_l, u_r)`` [px]; NaN for lines not in front of the camera.
+    J_I_X : (m, 2, 3) Jacobian w.r.t. the pose ``(x, y, theta)``.
+    J_I_l : (m, 2, 2) Jacobian w.r.t. the landmark's state: ``(x, y)`` for points; ``(s, ·)`` for wall
+        landmarks, whose second column is zero.
+    S : (m, 2, 2) innovation covariance ``H P Hᵀ + R`` [px²].
+    in_view : (m,) both columns inside the image (with the configured margin) and the line in front.
+    """
+
+    ids: np.ndarray
+    uv: np.ndarray
+    J_I_X: np.ndarray
+    J_I_l: np.ndarray
+    S: np.ndarray
+    in_view: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class UpdateResult:
+    """What one update used and saw, for evaluation.
+
+    ``ids`` (m,), ``innovations`` (m, 2) = measured − predicted ``(u_l, u_r)`` [px], ``nis`` (m,) the
+    normalised innovation squared of each observation alone (2 dof), ``nis_total`` that of the stacked
+    innovation (``dof = 2m``).
+    """
+
+    ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    innovations: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    nis: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    nis_total: float = 0.0
+
+    @property
+    def dof(self) -> int:
+        return 2 * len(self.ids)
+
+
+# ------------------------------------------------------------- linear algebra
+def _add_sym_rank(P: np.ndarray, A: np.ndarray, K: np.ndarray, block: int = 256) -> None:
+    """``P ← P + A Kᵀ + K Aᵀ`` in place for a symmetric (N, N) ``P`` and (N, r) ``A``, ``K``.
+
+    A symmetric rank-2r update: each strip of rows ``P[i0:i1, i0:]`` on and above the diagonal gets one
+    (b, 2r) × (2r, N − i0) product, and is then mirrored below the diagonal. Half the flops of
+    ``P += A @ K.T + K @ A.T``, no (N, N) temporary, no column-wise walk over ``P`` (``M + M.T`` in NumPy
+    costs several times the product), and ``P`` stays exactly symmetric.
+    """
+    n = len(P)
+    left = np.concatenate([A, K], axis=1)
+    right = np.concatenate([K, A], axis=1)
+    for i0 in range(0, n, block):
+        i1 = min(i0 + block, n)
+        strip = P[i0:i1, i0:]
+        strip += left[i0:i1] @ right[i0:].T
+        diag = strip[:, : i1 - i0]
+        diag[...] = np.triu(diag) + np.triu(diag, 1).T
+        P[i1:, i0:i1] = strip[:, i1 - i0:].T
+
+
+# ---------------------------------------------------------------- validation
+def _matrix(a, shape: tuple[int, int], where: str) -> np.ndarray:
+    m = np.asarray(a, dtype=float)
+    if m.shape != shape or not np.all(np.isfinite(m)):
+        got = f"shape {m.shape}" if m.shape != shape else "non-finite entries"
+        raise InputError(f"{where}: expected a finite {shape[0]}×{shape[1]} matrix, got {got}")
+    return m
+
+
+def _covariance(a, n: int, where: str) -> np.ndarray:
+    """A symmetric PSD (n, n) matrix, symmetrised exactly."""
+    m = _matrix(a, (n, n), where)
+    scale = max(1.0, float(np.abs(m).max(initial=0.0)))
+    if not np.allclose(m, m.T, rtol=0.0, atol=1e-9 * scale):
+        raise InputError(f"{where}: expected a symmetric matrix, got one with asymmetry "
+                         f"{np.abs(m - m.T).max():.3g}")
+    m = 0.5 * (m + m.T)
+    if n and np.linalg.eigvalsh(m).min() < -1e-9 * scale:
+        raise InputError(f"{where}: expected a positive semi-definite matrix, got smallest eigenvalue "
+                         f"{np.linalg.eigvalsh(m).min():.3g}")
+    return m
+
+
+# --------------------------------------------------------------------- filter
+class JointEKF:
+    """EKF over the robot pose and the landmarks (paper Sec 5; module docstring for the model).
+
+    Parameters
+    ----------
+    camera : the stereo head (its ``pan`` is replaced per frame by the ``pan`` argument of the methods).
+    pose : (3,) or :class:`SE2`, initial ``(x, y, theta)`` in the map frame.
+    cov_pose : (3, 3) over ``(x [m], y [m], theta [rad])``.
+    config : :class:`EKFConfig`.
+
+    The filter is mutable: :meth:`predict`, :meth:`add_landmarks`, :meth:`update` and
+    :meth:`remove_landmark` change it; accessors return copies.
+    """
+
+    def __init__(self, camera: StereoCamera, pose, cov_pose, config: EKFConfig | None = None) -> None:
+        self._camera_base = camera
+        self.config = config if config is not None else EKFConfig()
+        x0 = pose.as_array() if isinstance(pose, SE2) else np.asarray(pose, dtype=float)
+        if x0.shape != (3,) or not np.all(np.isfinite(x0)):
+            raise InputError(expected("a finite pose (x, y, theta)", pose, where="ekf.pose"))
+        self._x = x0.copy()
+        self._x[2] = wrap_angle(self._x[2])
+        self._P = _covariance(cov_pose, 3, "ekf.cov_pose").copy()
+        self._var_img = self.config.sigma_img**2
+        self._R1 = self._var_img * np.eye(2)
+        self._panned = (camera.pan, camera)
+        self._tracks: dict[int, _Track] = {}
+        self._next_id = 0
+        self._reindex()
+
+    # --------------------------------------------------------- bookkeeping
+    def _reindex(self) -> None:
+        """Rebuild the per-landmark arrays (state order = insertion order)."""
+        n = len(self._tracks)
+        self._ids = np.fromiter(self._tracks, dtype=int, count=n)
+        self._row = {int(i): r for r, i in enumerate(self._ids)}
+        tracks = list(self._tracks.values())
+        dims = np.array([t.dim for t in tracks], dtype=int)
+        first = 3 + np.concatenate([[0], np.cumsum(dims)[:-1]]).astype(int) if n else np.zeros(0, dtype=int)
+        self._idx2 = np.stack([first, first + dims - 1], axis=1)  # state indices of (l_1, l_2); walls repeat l_1
+        self._start = np.array([t.start for t in tracks]).reshape(n, 2)
+        self._J_p_l = np.array([t.J_p_l for t in tracks]).reshape(n, 2, 2)
+
+    def _rows(self, ids, where: str) -> np.ndarray:
+        ids = [int(i) for i in ids]
+        missing = [i for i in ids if i not in self._row]
+        if missing:
+            raise InputError(expected("ids of landmarks in the filter", missing[0], where=where))
+        if len(set(ids)) != len(ids):
+            raise InputError(f"{where}: expected each landmark at most once, got ids {ids}")
+        return np.array([self._row[i] for i in ids], dtype=int)
+
+    def _slice_of_row(self, r: int) -> slice:
+        return slice(int(self._idx2[r, 0]), int(self._idx2[r, 1]) + 1)
+
+    def _camera(self, pan: float) -> StereoCamera:
+        """The camera panned by ``pan`` (the last one is cached: a frame asks several times)."""
+        if self._panned[0] != pan:
+            self._panned = (pan, self._camera_base.with_pan(pan))
+        return self._panned[1]
+
+    @property
+    def camera(self) -> StereoCamera:
+        """The stereo head the filter was made with."""
+        return self._camera_base
+
+    # ------------------------------------------------------------ accessors
+    @property
+    def pose(self) -> np.ndarray:
+        """(3,) ``(x, y, theta)`` in the map frame."""
+        return self._x[:3].copy()
+
+    @property
+    def cov_pose(self) -> np.ndarray:
+        """(3, 3) covariance over ``(x, y, theta)``."""
+        return self._P[:3, :3].copy()
+
+    @property
+    def state(self) -> np.ndarray:
+        """(N,) the full state ``(X, l_1 … l_n)``."""
+        return self._x.copy()
+
+    @property
+    def cov(self) -> np.ndarray:
+        """(N, N) the full covariance (a copy: O(N²))."""
+        return self._P.copy()
+
+    @property
+    def landmark_ids(self) -> list[int]:
+        """Ids in state order."""
+        return [int(i) for i in self._ids]
+
+    @property
+    def n_landmarks(self) -> int:
+        return len(self._tracks)
+
+    def state_slice(self, landmark_id: int) -> slice:
+        """Where a landmark's ``(s,)`` or ``(x, y)`` sits in :attr:`state`."""
+        return self._slice_of_row(int(self._rows([landmark_id], "state_slice")[0]))
+
+    def landmark_position(self, landmark_id: int) -> np.ndarray:
+        """(2,) map-frame ``(x, y)`` [m] of a landmark."""
+        r = int(self._rows([landmark_id], "landmark_position")[0])
+        return self._start[r] + self._J_p_l[r] @ self._x[self._idx2[r]]
+
+    def landmark_cov2d(self, landmark_id: int) -> np.ndarray:
+        """(2, 2) map-frame covariance [m²]; rank 1 along the wall for a wall landmark (Eq 17)."""
+        r = int(self._rows([landmark_id], "landmark_cov2d")[0])
+        J, i = self._J_p_l[r], self._idx2[r]
+        return J @ self._P[np.ix_(i, i)] @ J.T
+
+    def landmark(self, landmark_id: int) -> LandmarkEstimate:
+        """A snapshot of one landmark."""
+        r = int(self._rows([landmark_id], "landmark")[0])
+        t = self._tracks[int(landmark_id)]
+        sl = self._slice_of_row(r)
+        return LandmarkEstimate(
+            id=t.id, kind=t.kind, plane_id=t.plane.id if t.plane is not None else None,
+            edge=t.edge if t.kind == "wall" else None, value=self._x[sl].copy(), cov=self._P[sl, sl].copy(),
+            position=self.landmark_position(t.id), cov2d=self.landmark_cov2d(t.id), z_low=t.z_low,
+            z_high=t.z_high, n_observed=t.n_observed, first_frame=t.first_frame, last_frame=t.last_frame)
+
+    def copy(self) -> JointEKF:
+        """An independent copy of the filter."""
+        return _copy.deepcopy(self)
+
+    # -------------------------------------------------------------- predict
+    def predict(self, U, cov_U) -> None:
+        """Odometry prediction (paper Eq 19): ``X ← X ⊕ U``, landmarks unchanged.
+
+        ``U`` (3,) is the increment in the robot frame, ``cov_U`` (3, 3) its covariance over
+        ``(dx [m], dy [m], dtheta [rad])``. Only the pose blocks change: ``P_XX ← F P_XX Fᵀ + J_U cov_U J_Uᵀ``,
+        ``P_XL ← F P_XL``: O(n).
+        """
+        U = np.asarray(U, dtype=float)
+        if U.shape != (3,) or not np.all(np.isfinite(U)):
+            raise InputError(expected("a finite odometry increment (dx, dy, dtheta)", U, where="predict.U"))
+        cov_U = _matrix(cov_U, (3, 3), "predict.cov_U")  # symmetric PSD by contract; not checked per step
+        X_new, F, J_U = motion(self._x[:3], U, jacobians=True)
+        P = self._P
+        P_XX = F @ P[:3, :3] @ F.T + J_U @ cov_U @ J_U.T
+        self._x[:3] = X_new
+        P[:3, :3] = 0.5 * (P_XX + P_XX.T)
+        if len(P) > 3:
+            P[:3, 3:] = F @ P[:3, 3:]
+            P[3:, :3] = P[:3, 3:].T
+
+    # ------------------------------------------------------------------ add
+    def add_landmarks(self, new: Sequence[NewLandmark], cov_new, *, cov_pose_new=None,
+                      frame: int | None = None, ids: Sequence[int] | None = None) -> list[int]:
+        """Append landmarks to the state with a joint initial covariance (DESIGN §4).
+
+        Parameters
+        ----------
+        new : the landmarks, in the order their dimensions appear in ``cov_new``.
+        cov_new : (D, D) joint covariance over their state dimensions (``D = Σ dim``). Landmarks modelled
+            from the same boundary in one frame share its variance as cross-covariance; entering them as
+            independent makes the filter overconfident.
+        cov_pose_new : (3, D) cross-covariance with the pose (default zero: a landmark measured from a
+            wall's known edge is nearly independent of the pose error). The new landmarks are taken as
+            independent of the old ones given the pose, so their cross-covariance with the old landmarks is
+            ``P_LX P_XX⁺ cov_pose_new`` (zero by default); any other choice could make ``P`` indefinite.
+        frame : frame index recorded as the landmarks' first frame.
+        ids : their ids (default: fresh ones); must not be in use.
+
+        Returns the ids of the new landmarks.
+        """
+        new = list(new)
+        if not new:
+            return []
+        for i, lm in enumerate(new):
+            if not isinstance(lm, NewLandmark):
+                raise InputError(expected("a NewLandmark", type(lm).__name__, where=f"add_landmarks.new[{i}]"))
+        D = sum(lm.dim for lm in new)
+        C = _covariance(cov_new, D, "add_landmarks.cov_new")
+        cross = None
+        if cov_pose_new is not None:
+            cross = _matrix(cov_pose_new, (3, D), "add_landmarks.cov_pose_new")
+            _covariance(np.block([[self._P[:3, :3], cross], [cross.T, C]]), 3 + D,
+                        "add_landmarks: joint covariance of pose and new landmarks")
+        if ids is None:
+            ids = list(range(self._next_id, self._next_id + len(new)))
+        ids = [int(i) for i in ids]
+        if len(ids) != len(new) or len(set(ids)) != len(ids) or any(i in self._tracks for i in ids):
+            raise InputError(expected(f"{len(new)} distinct unused landmark ids", ids, where="add_landmarks.ids"))
+        N = len(self._x)
+        P = np.zeros((N + D, N + D))
+        P[:N, :N] = self._P
+        P[N:, N:] = C
+        if cross is not None:
+            P[:N, N:] = self._P[:, :3] @ (np.linalg.pinv(self._P[:3, :3], hermitian=True) @ cross)
+            P[:3, N:] = cross
+            P[N:, :N] = P[:N, N:].T
+        self._P = P
+        self._x = np.concatenate([self._x, np.concatenate([np.asarray(lm.value, float) for lm in new])])
+        for i, lm in zip(ids, new, strict=True):
+            self._tracks[i] = _Track(i, lm.kind, lm.plane, lm.edge, lm.z_low, lm.z_high, frame, frame)
+        self._next_id = max(self._next_id, max(ids) + 1)
+        self._reindex()
+        return ids
+
+    def remove_landmark(self, landmark_id: int) -> None:
+        """Drop a landmark (marginalise it out: delete its rows and columns)."""
+        r = int(self._rows([landmark_id], "remove_landmark")[0])
+        keep = np.ones(len(self._x), dtype=bool)
+        keep[self._slice_of_row(r)] = False
+        self._x = self._x[keep]
+        self._P = self._P[np.ix_(keep, keep)]
+        del self._tracks[int(landmark_id)]
+        self._reindex()
+
+    # ------------------------------------------------------------ observation
+    def _project(self, rows: np.ndarray, x: np.ndarray, camera: StereoCamera):
+        """``uv`` (m, 2), ``J_I_X`` (m, 2, 3), ``J_I_l`` (m, 2, 2) of landmarks ``rows`` at state ``x``."""
+        J_p_l = self._J_p_l[rows]
+        p = self._start[rows] + np.einsum("mij,mj->mi", J_p_l, x[self._idx2[rows]])
+        uv, J_I_X, J_I_p = camera.project_columns(x[:3], p, jacobians=True)
+        return uv, J_I_X, J_I_p @ J_p_l
+
+    def _idx5(self, rows: np.ndarray) -> np.ndarray:
+        """(m, 5) state indices ``(x, y, theta, l_1, l_2)`` of each landmark's observation."""
+        return np.concatenate([np.broadcast_to(np.arange(3), (len(rows), 3)), self._idx2[rows]], axis=1)
+
+    def predict_observation(self, ids: Iterable[int] | None = None, pan: float = 0.0) -> ObservationPrediction:
+        """Predicted columns, Jacobians and innovation covariances of landmarks ``ids`` (default all).
+
+        Paper Eqs 3–4 and 20: ``(u_l, u_r) = J(X, P(l))`` with the head panned by ``pan`` [rad];
+        ``S_j = H_j P H_jᵀ + R``, ``H_j = [J_I_X, 0 … J_I_l … 0]``.
+        """
+        rows = np.arange(len(self._ids)) if ids is None else self._rows(list(ids), "predict_observation")
+        uv, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
+        idx = self._idx5(rows)
+        H = np.concatenate([J_I_X, J_I_l], axis=2)  # (m, 2, 5)
+        P_sub = self._P[idx[:, :, None], idx[:, None, :]]
+        S = H @ P_sub @ np.swapaxes(H, 1, 2) + self._R1
+        S = 0.5 * (S + np.swapaxes(S, 1, 2))
+        m = self.config.margin_px
+        in_view = np.all(np.isfinite(uv), axis=1) & np.all(self._camera_base.in_image(uv, m), axis=1)
+        return ObservationPrediction(self._ids[rows].copy(), uv, J_I_X, J_I_l, S, in_view)
+
+    def visible(self, pan: float = 0.0) -> list[int]:
+        """Ids of the landmarks predicted inside both images (the default association candidates)."""
+        pred = self.predict_observation(None, pan)
+        return [int(i) for i in pred.ids[pred.in_view]]
+
+    def observation_model(self, ids: Sequence[int], pan: float = 0.0
+                          ) -> tuple[Callable[[np.ndarray], np.ndarray], np.ndarray]:
+        """The stacked observation function of landmarks ``ids`` and its dense Jacobian (Eq 20).
+
+        Returns ``h`` mapping a full state (N,) to the stacked columns (2m,) = ``(u_l, u_r)`` per landmark,
+        and ``H`` (2m, N) = ∂h/∂S at the current state. For checks and dense reference filters; the
+        update itself never builds the dense ``H``.
+        """
+        rows = self._rows(ids, "observation_model")
+        cam = self._camera(pan)
+
+        def h(x: np.ndarray) -> np.ndarray:
+            return self._project(rows, np.asarray(x, dtype=float), cam)[0].reshape(-1)
+
+        _, J_I_X, J_I_l = self._project(rows, self._x, cam)
+        H = np.zeros((2 * len(rows), len(self._x)))
+        for j, r in enumerate(rows):
+            H[2 * j:2 * j + 2, :3] = J_I_X[j]
+            # np.add.at: a wall landmark's two indices coincide and its second column is zero.
+            np.add.at(H[2 * j:2 * j + 2], (slice(None), self._idx2[r]), J_I_l[j])
+        return h, H
+
+    # ------------------------------------------------------------- association
+    def associate(self, measured, pan: float = 0.0, candidates: Sequence[int] | None = None,
+                  extra_cost=None) -> list[tuple[int, int]]:
+        """Assign measured column pairs to landmarks one-to-one.
+
+        Parameters
+        ----------
+        measured : (k, 2) measured ``(u_l, u_r)`` [px] of this frame's segment pairs.
+        pan : the frame's pan angle [rad].
+        candidates : landmark ids to consider (default all); only those predicted inside both images stay.
+        extra_cost : optional (c, k) cost added to the squared Mahalanobis distance to break ties (e.g. from
+            heights or row extents), rows in the order of ``candidates`` (or of :attr:`landmark_ids`).
+
+        Each pair must pass the χ² gate (``config.gate_probability``, 2 dof) on its squared Mahalanobis
+        distance ``νᵀ S⁻¹ ν``; among gated pairs, :func:`scipy.optimize.linear_sum_assignment` finds the
+        largest one-to-one matching of least total cost. Pairs outside the gate are never assigned.
+
+        Returns ``[(landmark id, measurement index), …]`` sorted by measurement index.
+        """
+        z = np.asarray(measured, dtype=float).reshape(-1, 2) if np.size(measured) else np.zeros((0, 2))
+        if not np.all(np.isfinite(z)):
+            raise InputError(expected("finite measured columns", measured, where="associate.measured"))
+        pred = self.predict_observation(candidates, pan)
+        extra = None
+        if extra_cost is not None:
+            extra = _matrix(extra_cost, (len(pred.ids), len(z)), "associate.extra_cost")[pred.in_view]
+        ids, uv, S = pred.ids[pred.in_view], pred.uv[pred.in_view], pred.S[pred.in_view]
+        if len(ids) == 0 or len(z) == 0:
+            return []
+        nu = z[None, :, :] - uv[:, None, :]  # (c, k, 2)
+        d2 = np.einsum("cki,cij,ckj->ck", nu, np.linalg.inv(S), nu)
+        feasible = d2 <= self.config.gate
+        if not feasible.any():
+            return []
+        cost = d2 if extra is None else d2 + extra
+        big = (np.abs(cost[feasible]).max() + 1.0) * (min(cost.shape) + 1)
+        rows, cols = linear_sum_assignment(np.where(feasible, cost, big))
+        pairs = [(int(ids[r]), int(c)) for r, c in zip(rows, cols, strict=True) if feasible[r, c]]
+        return sorted(pairs, key=lambda p: p[1])
+
+    def information_gain(self, ids: Sequence[int], pan: float = 0.0) -> np.ndarray:
+        """(m,) expected information each landmark's observation alone gives about the pose [nat].
+
+        The mutual information between the observation ``z_j`` and the pose ``X``,
+        ``I = ½ log det S_j / det Cov(z_j | X)`` with ``Cov(z_j | X) = S_j − C_j P_XX⁺ C_jᵀ`` and
+        ``C_j = Cov(z_j, X)`` (``⁺``: pseudo-inverse); by symmetry of mutual information it equals
+        ``½ log det P_XX / det P_XX|z_j``, the log-det reduction of the pose covariance by updating with that
+        landmark alone. An uncertain landmark gains less: its own error explains much of the innovation.
+        """
+        rows = self._rows(ids, "information_gain")
+        pred = self.predict_observation(ids, pan)
+        P_XX = self._P[:3, :3]
+        P_lX = self._P[self._idx2[rows][:, :, None], np.arange(3)[None, None, :]]  # (m, 2, 3)
+        C = pred.J_I_X @ P_XX + pred.J_I_l @ P_lX
+        S_given_X = pred.S - C @ np.linalg.pinv(P_XX, hermitian=True) @ np.swapaxes(C, 1, 2)
+        return 0.5 * (np.linalg.slogdet(pred.S)[1] - np.linalg.slogdet(S_given_X)[1])
+
+    def select_for_update(self, pairs: Sequence[tuple[int, int]], pan: float = 0.0,
+                          k: int | None = None) -> list[tuple[int, int]]:
+        """The ``k`` associated pairs (default ``config.max_updates_per_frame``) whose landmarks give the
+        most information about the pose (:meth:`information_gain`), best first: the paper's "several, less
+        uncertain landmarks" (Sec 5)."""
+        pairs = list(pairs)
+        k = self.config.max_updates_per_frame if k is None else int(k)
+        if not pairs:
+            return []
+        gain = self.information_gain([p[0] for p in pairs], pan)
+        order = np.argsort(-gain, kind="stable")[:k]
+        return [pairs[i] for i in order]
+
+    # ----------------------------------------------------------------- update
+    def update(self, observations: Sequence[tuple[int, Sequence[float]]], pan: float = 0.0, *,
+               frame: int | None = None) -> UpdateResult:
+        """One stacked EKF update with the observed columns of landmarks (paper Eq 20).
+
+        Parameters
+        ----------
+        observations : ``[(landmark id, (u_l, u_r)), …]`` [px], each landmark at most once.
+        pan : the frame's pan angle [rad].
+        frame : frame index recorded as the landmarks' last observation.
+
+        With ``idx`` the pose's and the observed landmarks' state indices and ``H_sub`` (2m, |idx|)::
+
+            PHt = P[:, idx] H_subᵀ                      (N, 2m)
+            S   = H_sub PHt[idx] + R                     (2m, 2m)
+            K   = PHt S⁻¹                                (a solve, not an inverse)
+            x  += K ν                                    (ν = z − h(x); heading wrapped)
+            P  ← P − K PHtᵀ − PHt Kᵀ + K S Kᵀ            (Joseph form, exactly)
+
+        The last line is evaluated as ``P + A Kᵀ + K Aᵀ`` with ``A = ½ K S − PHt`` by one symmetric rank-2m
+        update over the upper triangle, mirrored (:func:`_add_sym_rank`): ``P`` stays exactly symmetric and no
+        (N, N) temporary is made. An empty list changes nothing.
+        """
+        obs = list(observations)
+        if not obs:
+            return UpdateResult()
+        rows = self._rows([o[0] for o in obs], "update.observations")
+        z = np.asarray([o[1] for o in obs], dtype=float)
+        m = len(rows)
+        if z.shape != (m, 2) or not np.all(np.isfinite(z)):
+            raise InputError(expected("finite (u_l, u_r) per observation", [o[1] for o in obs],
+                                      where="update.observations"))
+        uv, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
+        if not np.all(np.isfinite(uv)):
+            bad = int(self._ids[rows[~np.all(np.isfinite(uv), axis=1)][0]])
+            raise GeometryError(f"landmark {bad} is behind the camera; it cannot update the filter")
+        idx = np.concatenate([np.arange(3), self._idx2[rows].ravel()])
+        ar = np.arange(m)
+        H_l = np.zeros((m, 2, m, 2))
+        H_l[ar, :, ar, :] = J_I_l  # block diagonal; a wall landmark's repeated index gets a zero column
+        H = np.concatenate([J_I_X.reshape(2 * m, 3), H_l.reshape(2 * m, 2 * m)], axis=1)
+        nu = (z - uv).reshape(-1)
+        with _one_blas_thread(len(self._x)):
+            PHt = self._P[:, idx] @ H.T
+            S = H @ PHt[idx]
+            S = 0.5 * (S + S.T)
+            S[np.diag_indices(2 * m)] += self._var_img  # + R
+            sol = np.linalg.solve(S, np.column_stack([PHt.T, nu]))  # S⁻¹ [PHtᵀ | ν]
+            K = sol[:, :-1].T
+            self._x += K @ nu
+            _add_sym_rank(self._P, 0.5 * (K @ S) - PHt, K)
+        self._x[2] = wrap_angle(self._x[2])
+        nis_total = float(nu @ sol[:, -1])
+        nu2 = nu.reshape(m, 2)
+        S_blocks = S.reshape(m, 2, m, 2)[ar, :, ar, :]
+        nis = np.einsum("mi,mi->m", nu2, np.linalg.solve(S_blocks, nu2[..., None])[..., 0])
+        for r in rows:
+            t = self._tracks[int(self._ids[r])]
+            t.n_observed += 1
+            t.last_frame = frame if frame is not None else t.last_frame
+        return UpdateResult(self._ids[rows].copy(), nu2, nis, nis_total)
+
+    # ---------------------------------------------------------- serialisation
+    def landmarks_to_dict(self) -> list[dict]:
+        """The landmarks as plain dicts (JSON/YAML-able), in state order.
+
+        Wall: ``id, kind, plane, edge, s, var_s``; point: ``id, kind, x, y, cov``; both: ``position,
+        cov2d, z_low, z_high, n_observed, first_frame, last_frame``.
+        """
+        return [self.landmark(i).to_dict() for i in self.landmark_ids]
+
+    def to_dict(self, *, joint: bool = False) -> dict:
+        """Pose, pose covariance and landmarks as plain dicts; with ``joint`` also ``cov_landmarks``,
+        the (D, D) covariance over all landmark state dimensions in state order (cross-covariances kept)."""
+        d = {"pose": self.pose.tolist(), "cov_pose": self.cov_pose.tolist(), "landmarks": self.landmarks_to_dict()}
+        if joint:
+            d["cov_landmarks"] = self._P[3:, 3:].tolist()
+        return d
+
+    def load_prior_landmarks(self, data, world_map: Map, *, source: str = "landmarks") -> list[int]:
+        """Add a landmark map saved by :meth:`to_dict` / :meth:`landmarks_to_dict` (ids kept).
+
+        ``data`` is a list of landmark dicts or a mapping with ``landmarks`` and optionally
+        ``cov_landmarks`` (their joint covariance); without it the landmarks enter independent with their
+        own variances. Wall landmarks name their plane in ``world_map``. They enter uncorrelated with the
+        pose. Returns their ids.
+        """
+        joint = None
+        if isinstance(data, Mapping):
+            if "landmarks" not in data:
+                raise ConfigError(f"{source}: missing field 'landmarks'")
+            joint = data.get("cov_landmarks")
+            data = data["landmarks"]
+        if not isinstance(data, list):
+            raise ConfigError(expected("a list of landmarks", type(data).__name__, where=source))
+        new, ids, blocks = [], [], []
+        for i, d in enumerate(data):
+            lm, var = _parse_landmark(d, world_map, f"{source}: landmarks[{i}]")
+            new.append(lm)
+            ids.append(int(d["id"]))
+            blocks.append(var)
+        D = sum(lm.dim for lm in new)
+        if joint is not None:
+            try:
+                cov = _covariance(joint, D, f"{source}: cov_landmarks")
+            except InputError as exc:
+                raise ConfigError(str(exc)) from None
+        else:
+            cov = scipy.linalg.block_diag(*blocks) if blocks else np.zeros((0, 0))
+        try:
+            out = self.add_landmarks(new, cov, ids=ids)
+        except InputError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
+        for lm_id, d in zip(out, data, strict=True):
+            t = self._tracks[lm_id]
+            t.n_observed = int(d.get("n_observed", 0))
+            t.first_frame, t.last_frame = d.get("first_frame"), d.get("last_frame")
+        return out
+
+
+def _number(d: Mapping, key: str, where: str, *, nonneg: bool = False) -> float:
+    if key not in d:
+        raise ConfigError(f"{where}: missing field {key!r}")
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v) or (nonneg and v < 0):
+        raise ConfigError(expected("a non-negative number" if nonneg else "a finite number", v, where=f"{where}.{key}"))
+    return float(v)
+
+
+def _parse_landmark(d: object, world_map: Map, where: str) -> tuple[NewLandmark, np.ndarray]:
+    """One saved landmark → (NewLandmark, its own covariance)."""
+    if not isinstance(d, Mapping):
+        raise ConfigError(expected("a mapping with id and kind", d, where=where))
+    lm_id = d.get("id")
+    if isinstance(lm_id, bool) or not isinstance(lm_id, int | np.integer):
+        raise ConfigError(expected("an integer id", lm_id, where=f"{where}.id"))
+    kind = d.get("kind")
+    heights = {}
+    for key in ("z_low", "z_high"):
+        if d.get(key) is not None:
+            heights[key] = _number(d, key, where)
+    if kind == "wall":
+        plane_id = d.get("plane")
+        try:
+            plane = world_map[plane_id]
+        except KeyError:
+            raise ConfigError(expected(f"a plane of the map ({', '.join(p.id for p in world_map)})", plane_id,
+                                       where=f"{where}.plane")) from None
+        edge = d.get("edge", "p1")
+        if edge not in EDGES:
+            raise ConfigError(expected(f"one of {EDGES}", edge, where=f"{where}.edge"))
+        lm = NewLandmark.wall(plane, _number(d, "s", where), edge, **heights)
+        return lm, np.array([[_number(d, "var_s", where, nonneg=True)]])
+    if kind == "point":
+        lm = NewLandmark.point((_number(d, "x", where), _number(d, "y", where)), **heights)
+        try:
+            cov = _covariance(d.get("cov"), 2, f"{where}.cov")
+        except InputError as exc:
+            raise ConfigError(str(exc)) from None
+        return lm, cov
+    raise ConfigError(expected(f"one of {KINDS}", kind, where=f"{where}.kind"))

@@ -81,6 +81,8 @@ def test_true_columns_match_the_edges_in_the_images(lab_frames, k):
     frame = lab_frames[k]
     checked = 0
     for e in frame.truth.edges:
+        if e.id.endswith("-p2"):  # the far ends are free edges too, but not among Table 1's features
+            continue
         for image, u, visible in ((frame.left, e.u_l, e.visible_l), (frame.right, e.u_r, e.visible_r)):
             if not visible:
                 continue
@@ -98,7 +100,7 @@ def test_edges_are_sub_pixel_exact_in_noise_free_images(lab, lab_run):
     truth = lab_run.render(k, renderer).truth
     errors = []
     for e in truth.edges:
-        if e.wall in ("partition", "whiteboard") and e.visible_l and e.visible_r:
+        if e.wall in ("partition", "whiteboard") and e.visible_l and e.visible_r and not e.id.endswith("-p2"):
             for image, u in ((left, e.u_l), (right, e.u_r)):
                 errors.append(edge_column(image, u, e.v_top, e.v_bottom, e.polarity)[0] - u)
     errors = np.abs(errors)
@@ -112,7 +114,7 @@ def test_lab_run_keeps_the_features_in_view(lab, lab_run):
     for k in (0, 10, 20):
         truth = frame_truth(world, lab.camera.with_pan(lab_run.pans[k]), lab_run.poses[k])
         for e in truth.edges:
-            if e.wall in ("partition", "whiteboard"):
+            if e.wall in ("partition", "whiteboard") and not e.id.endswith("-p2"):
                 assert e.visible_l and e.visible_r, (k, e.id)
 
 

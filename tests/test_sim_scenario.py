@@ -40,7 +40,7 @@ def test_lab_is_built_in_and_matches_the_paper():
     assert {p.id for p in m.reference_planes} == {"partition", "whiteboard"}
     np.testing.assert_allclose(m["partition"].edge("p1"), [0.0, 4.0])
     np.testing.assert_allclose(m["whiteboard"].edge("p1"), [-0.55, 6.0])
-    assert m["partition"].free_edges == ("p1",) and m["whiteboard"].free_edges == ("p1",)
+    assert m["partition"].free_edges == ("p1", "p2") and m["whiteboard"].free_edges == ("p1", "p2")
     # Features 2..7 of Table 1 at their x positions and lengths.
     for wall, table in (("partition", PARTITION), ("whiteboard", WHITEBOARD)):
         plane = m[wall]

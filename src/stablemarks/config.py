@@ -37,8 +37,10 @@ class FilterConfig:
     """Largest |pair disparity − disparity image| that still agrees [px]."""
     min_support: float = 0.5
     """Fraction of the segment's rows that must agree."""
-    search_radius: int = 2
-    """Columns either side of the segment searched for an agreeing disparity [px]."""
+    search_radius: int = 7
+    """Columns either side of the segment searched for an agreeing disparity [px]: half the SAD window,
+    because an edge at a depth discontinuity takes its disparity from whichever side the window matched
+    (a low-texture plane, like a whiteboard, is matched only some pixels in from its edge)."""
 
 
 def _ekf_config_type():

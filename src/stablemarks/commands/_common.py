@@ -66,3 +66,13 @@ def load_camera(calib: str | None, mount_path: str | None, near: str | Path):
 def out_dir_arg(parser: argparse.ArgumentParser, default: str | None = None) -> None:
     parser.add_argument("--out", required=default is None, default=default, metavar="DIR",
                         help="output folder (created if missing)")
+
+
+def make_console():
+    """A rich console; when the output is not a terminal (a log, CI, `make demo | tee`), wide enough for
+    the tables instead of rich's 80 columns."""
+    import sys
+
+    from rich.console import Console
+
+    return Console(width=None if sys.stdout.isatty() else 160)

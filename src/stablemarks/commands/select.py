@@ -6,9 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rich.console import Console
-
-from ._common import load_camera, out_dir_arg, pose_prior
+from ._common import load_camera, make_console, out_dir_arg, pose_prior
 
 NAME = "select"
 HELP = "model and select landmarks on one stereo frame (prints Table 1, writes landmarks.csv/json, Figs 5-7)"
@@ -40,7 +38,7 @@ def run(args) -> int:
     from ..pipeline import process_frame
     from ._tables import landmark_table
 
-    console = Console()
+    console = make_console()
     config = load_config(args.config)
     world_map = load_map(args.map)
     X, cov_X = pose_prior(args.pose, args.pose_sigma)

@@ -72,3 +72,51 @@ def write_landmarks(out_dir: str | Path, candidates, extra: dict | None = None) 
     tmp.write_text(json.dumps(doc, indent=2))
     tmp.replace(json_path)
     return csv_path, json_path
+
+
+def _atomic_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def write_run(out_dir: str | Path, result, config=None) -> dict[str, Path]:
+    """Write an on-line run's results (REP-103/105: map frame; planar covariance over x, y, yaw):
+
+    ``trajectory.tum`` (the estimate), ``dead_reckoning.tum`` (odometry alone, same stamps),
+    ``groundtruth.tum`` when the truth is known, ``landmarks.yaml`` (the landmark map with covariances,
+    loadable as prior landmarks with ``--prior-landmarks``), ``log.jsonl`` (one line per frame) and
+    ``config.yaml`` (the resolved configuration).
+    """
+    import yaml
+
+    from .trajectory import write_tum
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    stamps = result.stamps
+    for name, poses in (("trajectory", result.poses), ("dead_reckoning", result.dead_reckoning),
+                        ("groundtruth", result.true_poses)):
+        if poses is None:
+            continue
+        tmp = out / f".{name}.tum.tmp"
+        write_tum(tmp, stamps, poses)
+        tmp.replace(out / f"{name}.tum")
+        paths[name] = out / f"{name}.tum"
+    doc = {
+        "frame": "map",
+        "units": "metres; s is the distance along the wall from its free edge `edge`; var_s in m²",
+        "method": result.method,
+        **result.ekf.to_dict(joint=True),
+    }
+    doc.pop("pose", None)
+    doc.pop("cov_pose", None)
+    _atomic_text(out / "landmarks.yaml", yaml.safe_dump(doc, sort_keys=False))
+    paths["landmarks"] = out / "landmarks.yaml"
+    _atomic_text(out / "log.jsonl", "".join(json.dumps(r.to_dict()) + "\n" for r in result.records))
+    paths["log"] = out / "log.jsonl"
+    if config is not None:
+        _atomic_text(out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
+        paths["config"] = out / "config.yaml"
+    return paths

@@ -61,13 +61,16 @@ def figure6(path: str | Path, left: np.ndarray, result) -> Path:
     for c in result.candidates:
         ax.plot([c.u_left] * 2, [c.v_top, c.v_bottom], color="black" if c.selected else "#888888",
                 lw=3.0 if c.selected else 1.5)
+    n_label = 0
     for model in result.planes:
         for b in model.boundaries:
             u, s = b.u[0], b.sigma_u[0]
             ax.axvline(u, color="#d00000", lw=1.2)
             for y in (6, H - 6):
                 ax.plot([u - s, u + s], [y, y], color="#d00000", lw=3)
-            ax.text(u + 3, 18, f"{model.fit.plane.label} boundary ±{s:.1f}px", color="#d00000", fontsize=8)
+            ax.text(u + 3, 20 + 16 * (n_label % 3), f"{model.fit.plane.label} {b.edge} ±{s:.1f}px",
+                    color="#d00000", fontsize=8)
+            n_label += 1
     ax.set_xlim(-0.5, W - 0.5)
     ax.set_ylim(H - 0.5, -0.5)
     ax.set_title("SAD matches (gray), planar regions, kept pairs (black), selected (thick), boundaries (red)")

@@ -1,0 +1,75 @@
+"""Figures of merit of a run: trajectory error, consistency (NEES/NIS) and landmark stability.
+
+Definitions (also in the README):
+
+- **ATE RMSE** — root mean square of the planar position error over all frames [m] (poses compared at the
+  same stamps in the map frame, no alignment: the map fixes the frame).
+- **NEES** of the pose — ``e_kᵀ P_k⁻¹ e_k`` with ``e_k`` the pose error (angle wrapped) and ``P_k`` the
+  filter's 3×3 pose covariance; 3 dof. Of a wall landmark — ``(s − s_true)² / var_s``; 1 dof.
+- **NIS** — ``νᵀ S⁻¹ ν`` of each landmark observation; 2 dof.
+- **χ² bounds** for an average over ``N`` runs of a ``d``-dof statistic:
+  ``[χ²⁻¹(0.025; N·d)/N, χ²⁻¹(0.975; N·d)/N]``.
+- **Re-observation rate** of a landmark — the fraction of the later frames in which its true feature is in
+  view and unoccluded in both images where the landmark was associated with a segment pair.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import chi2
+
+from .geometry import wrap_angle
+
+
+def position_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(n,) planar position errors [m] of poses (n, 3) against the truth (n, 3)."""
+    d = np.asarray(estimate, dtype=float)[:, :2] - np.asarray(truth, dtype=float)[:, :2]
+    return np.hypot(d[:, 0], d[:, 1])
+
+
+def ate_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """Absolute trajectory error: RMS of the planar position errors [m]."""
+    e = position_errors(estimate, truth)
+    return float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")
+
+
+def pose_nees(estimate: np.ndarray, covs: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(n,) NEES of poses (n, 3) with covariances (n, 3, 3) against the truth (n, 3); 3 dof."""
+    e = np.asarray(estimate, dtype=float) - np.asarray(truth, dtype=float)
+    e[:, 2] = wrap_angle(e[:, 2])
+    return np.einsum("ni,ni->n", e, np.linalg.solve(covs, e[..., None])[..., 0])
+
+
+def chi2_bounds(n_runs: int, dof: int, probability: float = 0.95) -> tuple[float, float]:
+    """Two-sided bounds of the average of ``n_runs`` χ²(dof) values: ``[χ²⁻¹(α/2; N·d)/N, χ²⁻¹(1−α/2; N·d)/N]``."""
+    a = (1.0 - probability) / 2.0
+    nd = n_runs * dof
+    return float(chi2.ppf(a, nd) / n_runs), float(chi2.ppf(1.0 - a, nd) / n_runs)
+
+
+def reobservation(result) -> dict:
+    """Per landmark (with a known true feature): frames after its creation where the true feature was
+    visible in both images, and how many of those the landmark was associated in.
+
+    Returns ``{landmark id: (n_associated, n_visible)}``.
+    """
+    out = {}
+    for lid, tid in result.truth_of.items():
+        first = next((r.index for r in result.records if lid in r.new), None)
+        if first is None:
+            continue
+        vis = [r for r in result.records if r.index > first and tid in r.visible_truth]
+        out[lid] = (sum(lid in r.associated for r in vis), len(vis))
+    return out
+
+
+def reobserved_at(result, frame: int) -> tuple[list[int], list[int]]:
+    """Landmarks whose true feature is visible at ``frame``: (associated ids, missed ids)."""
+    r = result.records[frame]
+    seen, missed = [], []
+    for lid, tid in result.truth_of.items():
+        first = next((x.index for x in result.records if lid in x.new), None)
+        if first is None or first >= frame or tid not in r.visible_truth:
+            continue
+        (seen if lid in r.associated else missed).append(lid)
+    return seen, missed

@@ -1,0 +1,371 @@
+"""The on-line loop (paper Sec 5, DESIGN.md §1 and §5): for every frame, predict with odometry, run the
+front end, associate segment pairs with the landmarks in view and update, then model and select new
+landmarks on the planes now in view. The stereo head looks at the midpoint of the visible free edges.
+
+The same loop runs on a simulated scenario (:class:`SimulatedSource`, rendered on the fly with the pan
+the loop commands) and on a recorded sequence folder (:class:`SequenceSource`, with the pans it
+recorded). Methods, for the evaluation's side-by-side comparison:
+
+``stablemarks``          the full method: plane-constrained landmarks that pass the selection rules;
+``plane_no_selection``   plane-constrained landmarks, every candidate (no selection rules);
+``all_segments``         every kept segment pair as a 2-D point landmark (classic stereo EKF-SLAM);
+``dead_reckoning``       odometry only.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import Config
+from .estimation import JointEKF, NewLandmark
+from .geometry import SE2, StereoCamera
+from .maps import Map
+from .pipeline import FrameLandmarks, run_front_end, select_landmarks
+
+METHODS = ("stablemarks", "plane_no_selection", "all_segments", "dead_reckoning")
+
+
+# ---------------------------------------------------------------- sources
+class SimulatedSource:
+    """A scenario's run, rendered frame by frame with the pan the loop commands (truth available)."""
+
+    def __init__(self, run, renderer=None, stamp_step: float = 0.5):
+        from .sim.render import renderer_for
+
+        self.run = run
+        self.scenario = run.scenario
+        self.name = run.scenario.name
+        self.camera: StereoCamera = run.scenario.camera
+        self.world_map: Map = run.scenario.map
+        self.start_pose = run.poses[0].as_array()
+        self.renderer = renderer or renderer_for(run.scenario)
+        self.stamp_step = stamp_step
+        self.recorded_pan = False
+
+    def __len__(self) -> int:
+        return len(self.run)
+
+    def stamp(self, k: int) -> float:
+        return k * self.stamp_step
+
+    def odometry(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        U = self.run.odometry[k]
+        return U.as_array(), self.scenario.robot.odometry.covariance(U)
+
+    def pan(self, k: int, X_belief: np.ndarray, previous: float | None) -> float:
+        from .motion import look_at_free_edges
+
+        plan = self.scenario.robot.pan
+        if plan.policy == "fixed":
+            return float(np.clip(plan.angle, *self.scenario.pan_limits))
+        return look_at_free_edges(self.world_map, self.camera, X_belief, limits=self.scenario.pan_limits,
+                                  default=plan.angle if previous is None else previous)
+
+    def images(self, k: int, pan: float):
+        frame = self.renderer.render(self.run.poses[k].as_array(), pan, self.run.frame_rng(k))
+        return frame.left, frame.right, frame.truth
+
+    def true_pose(self, k: int) -> np.ndarray | None:
+        return self.run.poses[k].as_array()
+
+
+class SequenceSource:
+    """A recorded sequence folder (see :mod:`stablemarks.io.sequence`); pans as recorded.
+
+    ``noise``: the odometry noise model (default: the sequence's, else 5 % of distance and 2° per metre);
+    ``start_pose``: overrides the sequence's initial pose (default: its ``initial_pose``, else the origin).
+    """
+
+    def __init__(self, sequence, noise=None, start_pose=None):
+        from .motion import OdometryNoise
+
+        self.sequence = sequence
+        self.name = sequence.name
+        self.camera = sequence.camera
+        self.world_map = sequence.world_map
+        self.noise = noise or getattr(sequence, "odometry_noise", None) or OdometryNoise()
+        if start_pose is None:
+            start_pose = sequence.initial_pose.as_array() if sequence.initial_pose is not None else np.zeros(3)
+        self.start_pose = np.asarray(start_pose, dtype=float)
+        self.recorded_pan = True
+
+    def __len__(self) -> int:
+        return len(self.sequence)
+
+    def stamp(self, k: int) -> float:
+        return float(self.sequence.stamps[k])
+
+    def odometry(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        U = self.sequence.odometry_increment(k)
+        return U.as_array(), self.noise.covariance(U)
+
+    def pan(self, k: int, X_belief, previous) -> float:
+        return float(self.sequence.pans[k])
+
+    def images(self, k: int, pan: float):
+        left, right = self.sequence.frame(k)
+        return left, right, None
+
+    def true_pose(self, k: int) -> np.ndarray | None:
+        gt = self.sequence.groundtruth
+        return None if gt is None else np.asarray(gt[k], dtype=float)
+
+
+# ---------------------------------------------------------------- results
+@dataclass
+class FrameRecord:
+    """What happened in one frame (one line of ``log.jsonl``)."""
+
+    index: int
+    stamp: float
+    pan: float
+    pose: np.ndarray
+    cov_pose: np.ndarray
+    dead_reckoning: np.ndarray
+    true_pose: np.ndarray | None
+    observed: list[int]
+    nis: list[float]
+    associated: list[int]
+    new: list[int]
+    n_landmarks: int
+    n_pairs: int
+    n_candidates: int
+    n_selected: int
+    warnings: list[str]
+    timings: dict[str, float]
+    visible_truth: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {
+            "index": self.index, "stamp": self.stamp, "pan": self.pan, "pose": self.pose.tolist(),
+            "cov_pose": self.cov_pose.tolist(), "dead_reckoning": self.dead_reckoning.tolist(),
+            "true_pose": None if self.true_pose is None else self.true_pose.tolist(),
+            "observed": self.observed, "nis": self.nis, "associated": self.associated, "new": self.new,
+            "n_landmarks": self.n_landmarks, "n_pairs": self.n_pairs, "n_candidates": self.n_candidates,
+            "n_selected": self.n_selected, "warnings": self.warnings, "timings": self.timings,
+            "visible_truth": self.visible_truth,
+        }
+
+
+@dataclass
+class OnlineResult:
+    """A whole run: per-frame records, the final filter, the first view's landmark model, and for
+    simulated sources which true feature each landmark was modelled from (``truth_of``)."""
+
+    name: str
+    method: str
+    records: list[FrameRecord]
+    ekf: JointEKF
+    world_map: Map
+    first_view: FrameLandmarks | None
+    truth_of: dict[int, str]
+    rejected_truth: dict[str, str]
+
+    @property
+    def stamps(self) -> np.ndarray:
+        return np.array([r.stamp for r in self.records])
+
+    @property
+    def poses(self) -> np.ndarray:
+        return np.array([r.pose for r in self.records])
+
+    @property
+    def covs(self) -> np.ndarray:
+        return np.array([r.cov_pose for r in self.records])
+
+    @property
+    def dead_reckoning(self) -> np.ndarray:
+        return np.array([r.dead_reckoning for r in self.records])
+
+    @property
+    def true_poses(self) -> np.ndarray | None:
+        if any(r.true_pose is None for r in self.records):
+            return None
+        return np.array([r.true_pose for r in self.records])
+
+
+# ------------------------------------------------------------------ loop
+def _match_truth(truth, plane_id: str, P: np.ndarray, sigma: float) -> str | None:
+    """Id of the true image edge on the same wall nearest to ``P`` within max(3σ, 5 cm)."""
+    best, best_d = None, max(3.0 * sigma, 0.05)
+    for e in truth.edges:
+        if e.wall != plane_id or not (e.visible_l and e.visible_r):
+            continue
+        d = float(np.hypot(e.x - P[0], e.y - P[1]))
+        if d <= best_d:
+            best, best_d = e.id, d
+    return best
+
+
+def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int) -> list[int]:
+    """Enter candidates as wall landmarks, jointly per boundary: ``Σ = σ_b² 11ᵀ + diag(σ_f²)`` (DESIGN §4)."""
+    ids = []
+    groups: dict[tuple[str, str], list] = {}
+    for c in candidates:
+        groups.setdefault((c.plane_id, c.edge), []).append(c)
+    for (plane_id, edge), group in groups.items():
+        plane = world_map[plane_id]
+        sb = group[0].sigma_b
+        sf = np.array([c.sigma_f for c in group])
+        cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
+        new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high) for c in group]
+        ids += ekf.add_landmarks(new, cov, frame=frame)
+    return ids
+
+
+def _new_point_landmarks(ekf: JointEKF, camera: StereoCamera, pairs, idx, frame: int) -> list[int]:
+    """Classic stereo EKF-SLAM initialisation of 2-D point landmarks with their pose cross-covariance."""
+    X = ekf.pose
+    P_XX = ekf.cov_pose
+    new, blocks, cross = [], [], []
+    for k in idx:
+        p, cov_z = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
+        if not np.all(np.isfinite(p)):
+            continue
+        Xc, Zc = camera.to_camera(X, p)
+        J_X = camera.triangulation_jacobian_pose(X, Xc, Zc)
+        blocks.append(cov_z + J_X @ P_XX @ J_X.T)
+        cross.append(P_XX @ J_X.T)
+        new.append(NewLandmark.point(p))
+    if not new:
+        return []
+    D = 2 * len(new)
+    C = np.zeros((D, D))
+    Jall = []
+    for i, b in enumerate(blocks):
+        C[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = b
+        Jall.append(cross[i])
+    # points triangulated from the same pose share its error: Cov(p_i, p_j) = J_i P_XX J_jᵀ
+    crossmat = np.concatenate(Jall, axis=1)  # (3, D) = P_XX J_allᵀ
+    J_stack = np.linalg.pinv(P_XX) @ crossmat if np.linalg.matrix_rank(P_XX) == 3 else None
+    if J_stack is not None:
+        full = J_stack.T @ P_XX @ J_stack
+        for i in range(len(new)):
+            for j in range(len(new)):
+                if i != j:
+                    C[2 * i : 2 * i + 2, 2 * j : 2 * j + 2] = full[2 * i : 2 * i + 2, 2 * j : 2 * j + 2]
+    return ekf.add_landmarks(new, C, cov_pose_new=crossmat, frame=frame)
+
+
+def run_online(
+    source,
+    *,
+    cov0=None,
+    config: Config = Config(),
+    method: str = "stablemarks",
+    prior_landmarks=None,
+    progress: Callable[[int, int], None] | None = None,
+) -> OnlineResult:
+    """Run the loop over every frame of ``source``; see the module docstring for ``method``.
+
+    ``cov0`` (3, 3): covariance of the start pose (default σ = 5 cm, 5 cm, 1°). ``prior_landmarks``: a
+    landmark map saved by a previous run (``landmarks.yaml``). ``progress(k, n)`` is called after each frame.
+    """
+    if method not in METHODS:
+        from .errors import InputError, expected
+
+        raise InputError(expected(f"one of {', '.join(METHODS)}", method, where="method"))
+    cov0 = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2 if cov0 is None else np.asarray(cov0, dtype=float)
+    camera = source.camera
+    world_map = source.world_map
+    ekf = JointEKF(camera, source.start_pose, cov0, config.ekf)
+    if prior_landmarks is not None:
+        ekf.load_prior_landmarks(prior_landmarks, world_map)
+    dr = SE2.from_array(source.start_pose)
+    records: list[FrameRecord] = []
+    truth_of: dict[int, str] = {}
+    rejected_truth: dict[str, str] = {}
+    first_view = None
+    pan = None
+    n = len(source)
+    for k in range(n):
+        t0 = time.perf_counter()
+        if k > 0:
+            U, cov_U = source.odometry(k)
+            ekf.predict(U, cov_U)
+            dr = dr @ SE2.from_array(U)
+        pan = source.pan(k, ekf.pose, pan)
+        left, right, truth = source.images(k, pan)
+        t1 = time.perf_counter()
+        timings = {"predict": t1 - t0}
+        observed, nis, associated, new_ids, warnings = [], [], [], [], []
+        n_pairs = n_cand = n_sel = 0
+        if method != "dead_reckoning":
+            front = run_front_end(left, right, config)
+            timings.update(front.timings)
+            pairs = front.kept_pairs
+            n_pairs = len(pairs)
+            t2 = time.perf_counter()
+            used_pairs: set[int] = set()
+            if ekf.n_landmarks and n_pairs:
+                measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+                assoc = ekf.associate(measured, pan)
+                associated = [int(i) for i, _ in assoc]
+                used_pairs = {int(j) for _, j in assoc}
+                chosen = ekf.select_for_update(assoc, pan)
+                if chosen:
+                    res = ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k)
+                    observed = [int(i) for i in res.ids]
+                    nis = [float(v) for v in res.nis]
+            t3 = time.perf_counter()
+            timings.update(associate_update=t3 - t2)
+            cam_k = camera.with_pan(pan)
+            if method == "all_segments":
+                idx = [j for j in range(n_pairs) if j not in used_pairs]
+                new_ids = _new_point_landmarks(ekf, cam_k, pairs, idx, k)
+            else:
+                sel = select_landmarks(front, cam_k, world_map, ekf.pose, ekf.cov_pose, config)
+                if first_view is None:
+                    first_view = sel
+                warnings = sel.warnings
+                n_cand = len(sel.candidates)
+                n_sel = len(sel.selected)
+                take = sel.candidates if method == "plane_no_selection" else sel.selected
+                fresh = [c for c in take if c.pair not in used_pairs and not _duplicate(ekf, c)]
+                new_ids = _new_wall_landmarks(ekf, world_map, fresh, k)
+                if truth is not None:
+                    for c in sel.candidates:
+                        tid = _match_truth(truth, c.plane_id, c.P, c.sigma_s)
+                        if tid is not None and not c.selected:
+                            rejected_truth.setdefault(tid, c.reason)
+                    for c, i in zip(fresh, new_ids, strict=True):
+                        tid = _match_truth(truth, c.plane_id, c.P, c.sigma_s)
+                        if tid is not None:
+                            truth_of[i] = tid
+            if method == "all_segments" and truth is not None:
+                for i in new_ids:
+                    lm = ekf.landmark(i)
+                    best, best_d = None, 0.1
+                    for e in truth.edges:
+                        if e.visible_l and e.visible_r:
+                            d = float(np.hypot(e.x - lm.position[0], e.y - lm.position[1]))
+                            if d < best_d:
+                                best, best_d = e.id, d
+                    if best is not None:
+                        truth_of[i] = best
+            timings.update(select=time.perf_counter() - t3)
+        timings["total"] = time.perf_counter() - t0
+        visible_truth = [] if truth is None else [e.id for e in truth.edges if e.visible_l and e.visible_r]
+        records.append(FrameRecord(
+            k, source.stamp(k), float(pan), ekf.pose, ekf.cov_pose, dr.as_array(), source.true_pose(k),
+            observed, nis, associated, new_ids, ekf.n_landmarks, n_pairs, n_cand, n_sel, warnings, timings,
+            visible_truth,
+        ))
+        if progress is not None:
+            progress(k + 1, n)
+    return OnlineResult(source.name, method, records, ekf, world_map, first_view, truth_of, rejected_truth)
+
+
+def _duplicate(ekf: JointEKF, c) -> bool:
+    """Whether a wall landmark on the same plane and edge already explains candidate ``c`` (3σ)."""
+    for i in ekf.landmark_ids:
+        lm = ekf.landmark(i)
+        if lm.kind != "wall" or lm.plane_id != c.plane_id or lm.edge != c.edge:
+            continue
+        if abs(float(lm.value[0]) - c.s) <= 3.0 * np.sqrt(float(lm.cov[0, 0]) + c.sigma_s**2):
+            return True
+    return False

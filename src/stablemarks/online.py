@@ -164,6 +164,7 @@ class OnlineResult:
     first_view: FrameLandmarks | None
     truth_of: dict[int, str]
     rejected_truth: dict[str, str]
+    cov0: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
 
     @property
     def stamps(self) -> np.ndarray:
@@ -357,7 +358,7 @@ def run_online(
         ))
         if progress is not None:
             progress(k + 1, n)
-    return OnlineResult(source.name, method, records, ekf, world_map, first_view, truth_of, rejected_truth)
+    return OnlineResult(source.name, method, records, ekf, world_map, first_view, truth_of, rejected_truth, cov0)
 
 
 def _duplicate(ekf: JointEKF, c) -> bool:

@@ -49,13 +49,12 @@ def motion_summary(result) -> dict:
 def dead_reckoning_2sigma(result, noise) -> float:
     """2σ position uncertainty of odometry alone at the end (the same noise model, propagated)."""
     from ..estimation import motion
+    from ..geometry import SE2
 
-    cov = np.asarray(result.covs[0], dtype=float).copy()
+    cov = np.asarray(result.cov0, dtype=float).copy()
     X = result.dead_reckoning[0]
     for k in range(1, len(result.records)):
         prev = result.dead_reckoning[k - 1]
-        from ..geometry import SE2
-
         U = SE2.from_array(prev).between(SE2.from_array(result.dead_reckoning[k]))
         X, F, J_U = motion(X, U.as_array(), jacobians=True)
         cov = F @ cov @ F.T + J_U @ noise.covariance(U) @ J_U.T
@@ -85,6 +84,6 @@ def print_motion_summary(console, result, noise=None) -> dict:
         if f"reobserved_at_{name}" in s:
             a, b = s[f"reobserved_at_{name}"]
             console.print(f"at {name}: re-observed {a} of the {b} landmarks whose feature is in view")
-    if "reobservation_rate" in s:
+    if np.isfinite(s.get("reobservation_rate", float("nan"))):
         console.print(f"re-observation rate of the landmarks over the run: {s['reobservation_rate']:.1%}")
     return s

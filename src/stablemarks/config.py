@@ -36,7 +36,7 @@ class FilterConfig:
     tolerance: float = 1.0
     """Largest |pair disparity − disparity image| that still agrees [px]."""
     min_support: float = 0.5
-    """Fraction of the segment's rows that must agree."""
+    """Fraction of the segment's edge pixels that must agree."""
     search_radius: int = 7
     """Columns either side of the segment searched for an agreeing disparity [px]: half the SAD window,
     because an edge at a depth discontinuity takes its disparity from whichever side the window matched

@@ -1,0 +1,37 @@
+"""Shared fixtures: the lab scenario's first view, processed once per test session."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+COV_PRIOR = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
+
+
+@pytest.fixture(scope="session")
+def lab_scenario():
+    from stablemarks.sim.scenario import load_scenario
+
+    return load_scenario("lab")
+
+
+@pytest.fixture(scope="session")
+def lab_sim(lab_scenario):
+    from stablemarks.sim.run import simulate_run
+
+    return simulate_run(lab_scenario)
+
+
+@pytest.fixture(scope="session")
+def lab_first_frame(lab_sim):
+    return lab_sim.render(0)
+
+
+@pytest.fixture(scope="session")
+def lab_first_view(lab_scenario, lab_sim, lab_first_frame):
+    """The full pipeline on the lab's first view with the start pose as prior."""
+    from stablemarks.pipeline import process_frame
+
+    camera = lab_scenario.camera.with_pan(lab_sim.pans[0])
+    X0 = lab_sim.poses[0].as_array()
+    return process_frame(lab_first_frame.left, lab_first_frame.right, camera, lab_scenario.map, X0, COV_PRIOR)

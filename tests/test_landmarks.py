@@ -1,0 +1,137 @@
+"""Landmark modeling and selection on rendered scenes of other layouts (Sec 3-4)."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from stablemarks.landmarks import (
+    REASON_LENGTH,
+    REASON_NEAR_BOUNDARY,
+    Boundary,
+    Candidate,
+    LandmarkConfig,
+    minimum_variance_column,
+    robust_rows,
+    select,
+)
+from stablemarks.pipeline import process_frame
+from stablemarks.sim.render import render_stereo
+from stablemarks.sim.scenario import parse_scenario
+
+from .conftest import COV_PRIOR
+
+BASE = {
+    "name": "wall-test",
+    "camera": {"width": 640, "height": 480, "f": 500.0, "baseline": 0.12, "mount_height": 1.0, "image_noise": 2.0},
+    "walls": [
+        {"id": "panel", "p1": [0.0, 3.5], "p2": [1.5, 3.5], "z": [0.0, 1.8], "free_edges": ["p1", "p2"],
+         "texture": {"kind": "noise", "base": 110, "contrast": 14, "scale": 0.03}},
+        {"id": "back", "p1": [-5.0, 7.0], "p2": [5.0, 7.0], "z": [0.0, 2.8], "reference": False,
+         "texture": {"kind": "noise", "base": 140, "contrast": 10, "scale": 0.05}},
+    ],
+    "features": [
+        {"id": "panel-a", "wall": "panel", "s": 0.45, "z": [0.5, 1.4], "kind": "edge", "contrast": 60, "fade": 0.3},
+        {"id": "panel-b", "wall": "panel", "s": 0.85, "z": [0.3, 1.2], "kind": "edge", "contrast": -60, "fade": 0.3},
+    ],
+    "robot": {"start": {"x": 0.3, "y": 0.0, "theta_deg": 90.0}},
+}
+X0 = np.array([0.3, 0.0, np.pi / 2])
+
+
+def run_scene(doc, X_prior=X0, cov=COV_PRIOR, seed=0):
+    sc = parse_scenario(doc, "test")
+    frame = render_stereo(sc, X0, 0.0, np.random.default_rng(seed))
+    return process_frame(frame.left, frame.right, sc.camera, sc.map, X_prior, cov), frame
+
+
+def assert_true_features_selected(result, frame, ids=("panel-a", "panel-b")):
+    truth = {e.id: e for e in frame.truth.edges}
+    for fid in ids:
+        e = truth[fid]
+        near = [c for c in result.selected if np.hypot(c.P[0] - e.x, c.P[1] - e.y) <= 3 * c.sigma_s]
+        assert near, f"{fid} not selected"
+
+
+def test_features_on_a_plain_wall_are_selected():
+    result, frame = run_scene(BASE)
+    assert_true_features_selected(result, frame)
+
+
+def test_wall_at_an_angle():
+    doc = copy.deepcopy(BASE)
+    doc["walls"][0].update(p1=[-0.2, 3.0], p2=[1.2, 4.2])  # 40° to the image plane
+    result, frame = run_scene(doc)
+    assert result.fits[0], result.warnings
+    assert_true_features_selected(result, frame)
+    for c in result.candidates:  # every candidate lies on the map's wall, with rank-1 covariance along it
+        assert abs(result.fits[0].plane.offset(c.P)) < 1e-9
+        assert np.linalg.matrix_rank(c.cov, tol=1e-12) == 1
+
+
+def test_clutter_in_front_of_the_wall_is_not_selected():
+    doc = copy.deepcopy(BASE)
+    doc["clutter"] = {"poles": [{"id": "pole", "center": [0.65, 2.6], "radius": 0.04, "height": 1.9,
+                                 "texture": {"kind": "plain", "base": 30}}]}
+    result, frame = run_scene(doc)
+    assert result.fits[0]
+    assert_true_features_selected(result, frame, ("panel-a",))
+    cam = parse_scenario(doc, "test").camera
+    d_pole = cam.disparity(X0, np.array([0.65, 2.6]))
+    assert (np.abs(result.front.pairs.disparity - d_pole) < 2.0).any()  # the pole's edges are matched ...
+    for c in result.candidates:  # ... but none of them is a candidate on the panel
+        assert abs((c.u_left - c.u_right) - d_pole) > 2.0, c
+
+
+def test_plane_without_texture_gives_no_landmarks_and_no_crash():
+    doc = copy.deepcopy(BASE)
+    doc["walls"][0]["texture"] = {"kind": "plain", "base": 110}
+    doc["features"] = []
+    doc["camera"]["image_noise"] = 0.0
+    result, _ = run_scene(doc)
+    assert result.selected == []
+
+
+def test_wrong_pose_prior_puts_the_plane_outside_the_window():
+    X_wrong = np.array([0.3, 0.0, np.pi / 2 + np.deg2rad(70)])  # looking far to the left
+    result, _ = run_scene(BASE, X_prior=X_wrong, cov=np.diag([0.01, 0.01, np.deg2rad(0.5)]) ** 2)
+    assert result.selected == []
+    assert result.warnings and "no reference plane" in result.warnings[0]
+
+
+# --------------------------------------------------------------- units
+def test_minimum_variance_column_is_the_mean_inside_the_window():
+    cols = np.array([10.0, 11.0, 12.0, 11.0])
+    m, var = minimum_variance_column(cols, 5, 20)
+    assert m == pytest.approx(11.0) and var == pytest.approx(0.5)
+    m, _ = minimum_variance_column(cols, 12, 20)  # mean outside the window: best integer column inside
+    assert m == 12.0
+
+
+def test_robust_rows_drop_floor_rows():
+    cols = np.r_[np.full(50, 100.0) + np.random.default_rng(0).normal(0, 1, 50), [70.0, 72.0, 75.0]]
+    keep = robust_rows(cols, 3.0)
+    assert keep[:50].all() and not keep[50:].any()
+
+
+def _cand(s, sigma_f=0.003, ls=1.0):
+    return Candidate("w", "w", 0, 0, "p1", s, 0.035, sigma_f, np.array([s, 4.0]), np.zeros((2, 2)), 0.0, 1.0, ls,
+                     0.0, 0.0, 0.0, 0.0, P_observed=np.array([s, 4.0]))
+
+
+def test_selection_rules():
+    b = Boundary("w", "p1", np.zeros(2), np.ones(2), np.array([0.0, 4.0]), np.eye(2), 0.035, False, 100,
+                 np.array([1.0, 0.0]))
+    cands = [_cand(0.1094), _cand(0.1778), _cand(0.5, ls=0.5), _cand(-0.2)]
+    out = select(cands, [b])
+    assert [c.selected for c in out] == [False, True, False, False]
+    assert out[0].reason == REASON_NEAR_BOUNDARY and out[2].reason == REASON_LENGTH
+    assert out[3].reason == "outside the plane"
+    # DESIGN's combined rule would select Table 1's partition 2 (109.4 mm > 3·35.1 mm)
+    combined = select(cands[:1], [b], LandmarkConfig(boundary_rule="combined"))
+    assert combined[0].selected
+
+
+def test_landmark_config_validation():
+    with pytest.raises(ValueError, match="boundary_rule"):
+        LandmarkConfig(boundary_rule="loose")

@@ -533,3 +533,20 @@ def test_bad_inputs_raise_with_expected_got():
         ekf.predict([0.1, 0.0, 0.0], [1.0, 1.0, 1.0])
     with pytest.raises(InputError, match=r"associate.extra_cost: expected a finite 5×1 matrix, got shape \(1, 1\)"):
         ekf.associate([[300.0, 290.0]], extra_cost=[[0.0]])
+
+
+def test_joint_association_refuses_a_shifted_assignment():
+    """A landmark out of sight must not take its neighbour's segment and push the others along."""
+    cam = StereoCamera()
+    plane = ReferencePlane("w", (0.0, 4.0), (2.0, 4.0), free_edges=("p1",))
+    X = np.array([0.0, 0.0, np.pi / 2])
+    ekf = JointEKF(cam, X, np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2)
+    s = np.array([0.2, 0.3, 0.5, 0.55, 0.9])
+    ekf.add_landmarks([NewLandmark.wall(plane, v) for v in s], 0.036**2 * np.eye(len(s)))
+    uv = cam.project_columns(X, plane.point_at(s))
+    measured = uv[:-1]  # the last landmark is not seen this frame
+    pairs = ekf.associate_joint(measured)
+    assert sorted(pairs) == [(i, i) for i in range(4)]
+    assert ekf.joint_nis(pairs, measured) < 1.0
+    shifted = [(i + 1, i) for i in range(4)]
+    assert ekf.joint_nis(shifted, measured) > ekf.joint_nis(pairs, measured)

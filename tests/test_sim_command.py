@@ -27,7 +27,8 @@ def test_render_lab_frames(tmp_path, capsys):
     last = truth["frames"][1]
     assert last["pose"] == pytest.approx([0.0, 2.0, np.pi / 2])
     assert len(last["odometry"]) == 3 and np.array(last["cov_odometry"]).shape == (3, 3)
-    assert {e["id"] for e in last["edges"] if e["boundary"]} == {"partition-p1", "partition-p2", "whiteboard-p1", "whiteboard-p2"}
+    boundaries = {e["id"] for e in last["edges"] if e["boundary"]}
+    assert boundaries == {"partition-p1", "partition-p2", "whiteboard-p1", "whiteboard-p2"}
     # The images on disk are the run's frames.
     left = cv2.imread(str(out / "frame_000020_left.png"), cv2.IMREAD_UNCHANGED)
     np.testing.assert_array_equal(left, simulate_run(load_scenario("lab"), 3).render(20).left)

@@ -615,8 +615,10 @@ class JointEKF:
             heights or row extents), rows in the order of ``candidates`` (or of :attr:`landmark_ids`).
 
         Each pair must pass the χ² gate (``config.gate_probability``, 2 dof) on its squared Mahalanobis
-        distance ``νᵀ S⁻¹ ν``; among gated pairs, :func:`scipy.optimize.linear_sum_assignment` finds the
-        largest one-to-one matching of least total cost. Pairs outside the gate are never assigned.
+        distance ``νᵀ S⁻¹ ν``; :func:`scipy.optimize.linear_sum_assignment` then finds the one-to-one matching
+        of least total cost in which leaving a landmark unassigned costs the gate value (global nearest
+        neighbour with a non-assignment option): a landmark out of sight does not take a neighbour's
+        measurement and push the others along. Pairs outside the gate are never assigned.
 
         Returns ``[(landmark id, measurement index), …]`` sorted by measurement index.
         """
@@ -636,10 +638,74 @@ class JointEKF:
         if not feasible.any():
             return []
         cost = d2 if extra is None else d2 + extra
-        big = (np.abs(cost[feasible]).max() + 1.0) * (min(cost.shape) + 1)
-        rows, cols = linear_sum_assignment(np.where(feasible, cost, big))
-        pairs = [(int(ids[r]), int(c)) for r, c in zip(rows, cols, strict=True) if feasible[r, c]]
+        c = len(ids)
+        big = (np.abs(cost[feasible]).max() + 1.0 + self.config.gate) * (c + 1)
+        dummy = np.full((c, c), big)
+        np.fill_diagonal(dummy, self.config.gate)
+        rows, cols = linear_sum_assignment(np.concatenate([np.where(feasible, cost, big), dummy], axis=1))
+        pairs = [(int(ids[r]), int(col)) for r, col in zip(rows, cols, strict=True)
+                 if col < len(z) and feasible[r, col]]
         return sorted(pairs, key=lambda p: p[1])
+
+    def joint_nis(self, pairs: Sequence[tuple[int, int]], measured, pan: float = 0.0) -> float:
+        """Joint NIS ``νᵀ S⁻¹ ν`` of a set of (landmark id, measurement index) pairs, with the full joint
+        innovation covariance (the pose error is shared by all of them); ``2·len(pairs)`` dof."""
+        if not pairs:
+            return 0.0
+        z = np.asarray(measured, dtype=float).reshape(-1, 2)[[j for _, j in pairs]]
+        rows = self._rows([i for i, _ in pairs], "joint_nis")
+        m = len(rows)
+        uv, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
+        idx = np.concatenate([np.arange(3), self._idx2[rows].ravel()])
+        ar = np.arange(m)
+        H_l = np.zeros((m, 2, m, 2))
+        H_l[ar, :, ar, :] = J_I_l
+        H = np.concatenate([J_I_X.reshape(2 * m, 3), H_l.reshape(2 * m, 2 * m)], axis=1)
+        S = H @ self._P[np.ix_(idx, idx)] @ H.T
+        S[np.diag_indices(2 * m)] += self._var_img
+        nu = (z - uv).reshape(-1)
+        return float(nu @ np.linalg.solve(S, nu))
+
+    def associate_joint(self, measured, pan: float = 0.0, candidates: Sequence[int] | None = None,
+                        extra_cost=None) -> list[tuple[int, int]]:
+        """One-to-one association whose pairs are *jointly* compatible.
+
+        All landmarks in view share the pose error, so a set of pairs that each pass the gate can still be
+        impossible together (a landmark out of sight taking its neighbour's segment and pushing the others
+        along by one). Pairs that pass the individual χ² gate are taken in order of increasing Mahalanobis
+        distance (plus ``extra_cost``), each kept only if its landmark and measurement are still free and
+        the joint NIS of the set stays inside the χ² gate of ``2n`` dof (sequential compatible nearest
+        neighbour, a greedy form of joint compatibility).
+        """
+        from scipy.stats import chi2
+
+        z = np.asarray(measured, dtype=float).reshape(-1, 2) if np.size(measured) else np.zeros((0, 2))
+        if not np.all(np.isfinite(z)):
+            raise InputError(expected("finite measured columns", measured, where="associate.measured"))
+        pred = self.predict_observation(candidates, pan)
+        extra = None
+        if extra_cost is not None:
+            extra = _matrix(extra_cost, (len(pred.ids), len(z)), "associate.extra_cost")[pred.in_view]
+        ids, uv, S = pred.ids[pred.in_view], pred.uv[pred.in_view], pred.S[pred.in_view]
+        if len(ids) == 0 or len(z) == 0:
+            return []
+        nu = z[None, :, :] - uv[:, None, :]
+        d2 = np.einsum("cki,cij,ckj->ck", nu, np.linalg.inv(S), nu)
+        cost = d2 if extra is None else d2 + extra
+        order = [(r, c) for r, c in zip(*np.nonzero(d2 <= self.config.gate), strict=True)]
+        order.sort(key=lambda rc: cost[rc])
+        chosen: list[tuple[int, int]] = []
+        used_r, used_c = set(), set()
+        p = self.config.gate_probability
+        for r, c in order:
+            if r in used_r or c in used_c:
+                continue
+            trial = chosen + [(int(ids[r]), int(c))]
+            if self.joint_nis(trial, z, pan) <= chi2.ppf(p, 2 * len(trial)):
+                chosen = trial
+                used_r.add(r)
+                used_c.add(c)
+        return sorted(chosen, key=lambda q: q[1])
 
     def information_gain(self, ids: Sequence[int], pan: float = 0.0) -> np.ndarray:
         """(m,) expected information each landmark's observation alone gives about the pose [nat].

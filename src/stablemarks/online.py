@@ -304,7 +304,7 @@ def run_online(
             used_pairs: set[int] = set()
             if ekf.n_landmarks and n_pairs:
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
-                assoc = ekf.associate(measured, pan)
+                assoc = ekf.associate_joint(measured, pan)
                 associated = [int(i) for i, _ in assoc]
                 used_pairs = {int(j) for _, j in assoc}
                 chosen = ekf.select_for_update(assoc, pan)

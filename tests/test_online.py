@@ -1,0 +1,125 @@
+"""The on-line loop on the simulated lab and on recorded sequences (paper Sec 5)."""
+
+import numpy as np
+import pytest
+import yaml
+
+from stablemarks.geometry import SE2
+from stablemarks.io.results import write_run
+from stablemarks.metrics import ate_rmse, reobserved_at
+from stablemarks.online import SimulatedSource, run_online
+from stablemarks.sim.run import simulate_run
+
+from .helpers import assert_psd
+
+
+class ShortSource(SimulatedSource):
+    """The first ``n`` frames of a simulated run."""
+
+    def __init__(self, run, n):
+        super().__init__(run)
+        self.n = n
+
+    def __len__(self):
+        return self.n
+
+
+@pytest.fixture(scope="module")
+def lab_short(lab_scenario):
+    run = simulate_run(lab_scenario, seed=5)
+    return run, run_online(ShortSource(run, 11))
+
+
+def test_lab_run_localizes_better_than_dead_reckoning(lab_short):
+    run, result = lab_short
+    T = result.true_poses
+    assert result.ekf.n_landmarks >= 8
+    assert result.records[0].new and not result.records[0].observed
+    assert ate_rmse(result.poses, T) < ate_rmse(result.dead_reckoning, T)
+    # the estimate's uncertainty stays below what odometry alone would give
+    assert np.trace(result.covs[-1][:2, :2]) < np.trace(result.cov0[:2, :2])
+    for r in result.records:
+        assert_psd(r.cov_pose)
+    assert_psd(result.ekf.cov)
+
+
+def test_landmarks_in_view_are_reobserved_at_one_metre(lab_short):
+    _, result = lab_short
+    seen, missed = reobserved_at(result, 10)
+    assert len(seen) >= 6
+    assert len(missed) <= 1
+
+
+def test_new_landmarks_are_wall_landmarks_with_rank_one_covariance(lab_short):
+    _, result = lab_short
+    for i in result.ekf.landmark_ids:
+        lm = result.ekf.landmark(i)
+        assert lm.kind == "wall" and lm.plane_id in ("partition", "whiteboard")
+        assert np.linalg.matrix_rank(lm.cov2d, tol=1e-14) == 1
+
+
+def test_dead_reckoning_method_integrates_odometry(lab_scenario):
+    run = simulate_run(lab_scenario, seed=2)
+    result = run_online(ShortSource(run, 5), method="dead_reckoning")
+    np.testing.assert_allclose(result.poses, result.dead_reckoning, atol=1e-12)
+    expected = [p.as_array() for p in run.dead_reckoning[:5]]
+    np.testing.assert_allclose(result.dead_reckoning, expected, atol=1e-9)
+    assert result.ekf.n_landmarks == 0
+
+
+class BlindSource(ShortSource):
+    """Frames whose images show nothing: every frame has no observation."""
+
+    def images(self, k, pan):
+        left, right, truth = super().images(k, pan)
+        return np.zeros_like(left), np.zeros_like(right), truth
+
+
+def test_frames_without_observations_only_predict(lab_scenario):
+    run = simulate_run(lab_scenario, seed=3)
+    result = run_online(BlindSource(run, 4))
+    assert result.ekf.n_landmarks == 0
+    assert all(r.n_pairs == 0 and not r.observed for r in result.records)
+    np.testing.assert_allclose(result.poses, result.dead_reckoning, atol=1e-12)
+    assert np.trace(result.covs[-1]) > np.trace(result.covs[0])
+
+
+def test_all_segments_baseline_adds_point_landmarks(lab_scenario):
+    run = simulate_run(lab_scenario, seed=4)
+    result = run_online(ShortSource(run, 2), method="all_segments")
+    kinds = {result.ekf.landmark(i).kind for i in result.ekf.landmark_ids}
+    assert kinds == {"point"}
+    assert_psd(result.ekf.cov)
+
+
+def test_outputs_and_prior_landmarks_round_trip(lab_short, tmp_path, lab_scenario):
+    run, result = lab_short
+    paths = write_run(tmp_path, result)
+    from stablemarks.io.trajectory import read_tum
+
+    stamps, poses = read_tum(paths["trajectory"])
+    np.testing.assert_allclose(poses, result.poses, atol=1e-6)
+    _, dr = read_tum(paths["dead_reckoning"])
+    np.testing.assert_allclose(dr, result.dead_reckoning, atol=1e-6)
+    lines = paths["log"].read_text().splitlines()
+    assert len(lines) == len(result.records)
+    doc = yaml.safe_load(paths["landmarks"].read_text())
+    # the landmark map starts a later run: its landmarks are observed from the first frame on
+    again = run_online(ShortSource(run, 2), prior_landmarks=doc)
+    assert again.records[0].observed
+    prior_ids = {lm["id"] for lm in doc["landmarks"]}
+    assert prior_ids <= set(again.ekf.landmark_ids)
+
+
+def test_unknown_method_is_rejected(lab_scenario):
+    run = simulate_run(lab_scenario, seed=1)
+    with pytest.raises(ValueError, match="method"):
+        run_online(ShortSource(run, 1), method="magic")
+
+
+def test_se2_between_matches_odometry_increments(lab_scenario):
+    run = simulate_run(lab_scenario, seed=1)
+    src = SimulatedSource(run)
+    U, cov = src.odometry(3)
+    np.testing.assert_allclose(SE2.from_array(U).as_array(), run.odometry[3].as_array())
+    assert_psd(cov)

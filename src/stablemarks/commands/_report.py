@@ -65,7 +65,7 @@ def print_motion_summary(console, result, noise=None) -> dict:
     s = motion_summary(result)
     if noise is not None:
         s["final_2sigma_dead_reckoning"] = dead_reckoning_2sigma(result, noise)
-    t = Table(title=f"{result.name}: {s['frames']} frames, {s['landmarks']} landmarks [mm]")
+    t = Table(title=f"{result.name}: {s['frames']} frames, {s['landmarks']} landmarks (mm)")
     t.add_column("")
     t.add_column("EKF (stablemarks)", justify="right")
     t.add_column("dead reckoning", justify="right")

@@ -13,7 +13,7 @@ def landmark_table(candidates, mm: bool = False, title: str = "Modelled features
     """The layout of the paper's Table 1: plane, index, x, y, l, σx, σy, ℓs, selected, reason."""
     k, unit = (1000.0, "mm") if mm else (1.0, "m")
     fmt = "{:.1f}" if mm else "{:.4f}"
-    t = Table(title=f"{title} [{unit}]")
+    t = Table(title=f"{title} ({unit})")
     for col in ("plane", "index", "x", "y", "l", "σx", "σy", "ℓs", "selected", "reason"):
         t.add_column(col, justify="left" if col in ("plane", "reason", "selected") else "right")
     for c in candidates:
@@ -51,7 +51,7 @@ def match_table1(candidates, plane_ids: dict[str, str], tolerance: float = 0.04)
 
 def table1_comparison(matches, truth_x: dict | None = None) -> Table:
     """Paper's Table 1 beside ours, row by row [mm]."""
-    t = Table(title="Table 1, paper vs stablemarks [mm]")
+    t = Table(title="Table 1, paper vs stablemarks (mm)")
     for col in ("plane", "idx", "x paper", "x ours", "σx paper", "σx ours", "σy ours", "l paper", "l ours",
                 "ℓs paper", "ℓs ours", "paper", "ours", "agree"):
         t.add_column(col, justify="right" if col not in ("plane", "paper", "ours", "agree") else "left")

@@ -151,3 +151,32 @@ def zoom_figure7(path: str | Path, result, planes: list[str]) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return Path(path)
+
+
+def disparity_image(path: str | Path, disparity: np.ndarray, num_disparities: int) -> Path:
+    """The disparity image coloured (turbo), invalid pixels black."""
+    import cv2
+
+    d = np.nan_to_num(np.asarray(disparity, dtype=np.float32), nan=0.0, posinf=0.0)
+    img = cv2.applyColorMap(np.clip(d * (255.0 / max(num_disparities, 1)), 0, 255).astype(np.uint8),
+                            cv2.COLORMAP_TURBO)
+    img[~np.isfinite(disparity)] = 0
+    cv2.imwrite(str(path), img)
+    return Path(path)
+
+
+def figure6_front(path: str | Path, left: np.ndarray, front) -> Path:
+    """Fig 6 without planes: valid SAD matches (gray) and the segment pairs the disparity image confirms."""
+    plt = _plt()
+    H, W = left.shape
+    fig, ax = plt.subplots(figsize=(8, 6.2))
+    base = np.full((H, W), 1.0)
+    base[front.disparity.valid] = 0.72
+    ax.imshow(base, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    _draw_pairs(ax, front.kept_pairs, "black", 1.5)
+    ax.set_title("SAD matches (gray) and the pairs the disparity check keeps (black)")
+    ax.set_axis_off()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
+from scipy.special import chdtri
 from threadpoolctl import ThreadpoolController
 
 from .errors import ConfigError, GeometryError, InputError, expected
@@ -126,7 +126,7 @@ class EKFConfig:
     @property
     def gate(self) -> float:
         """χ² threshold on the squared Mahalanobis distance of a 2-D innovation."""
-        return float(chi2.ppf(self.gate_probability, 2))
+        return float(chdtri(2, 1.0 - self.gate_probability))  # χ²⁻¹(p; 2)
 
 
 # --------------------------------------------------------------- landmarks
@@ -677,8 +677,6 @@ class JointEKF:
         the joint NIS of the set stays inside the χ² gate of ``2n`` dof (sequential compatible nearest
         neighbour, a greedy form of joint compatibility).
         """
-        from scipy.stats import chi2
-
         z = np.asarray(measured, dtype=float).reshape(-1, 2) if np.size(measured) else np.zeros((0, 2))
         if not np.all(np.isfinite(z)):
             raise InputError(expected("finite measured columns", measured, where="associate.measured"))
@@ -701,7 +699,7 @@ class JointEKF:
             if r in used_r or c in used_c:
                 continue
             trial = chosen + [(int(ids[r]), int(c))]
-            if self.joint_nis(trial, z, pan) <= chi2.ppf(p, 2 * len(trial)):
+            if self.joint_nis(trial, z, pan) <= chdtri(2 * len(trial), 1.0 - p):
                 chosen = trial
                 used_r.add(r)
                 used_c.add(c)

@@ -192,22 +192,34 @@ def minimum_variance_column(cols: np.ndarray, lo: float, hi: float) -> tuple[flo
     return m, float(((cols - m) ** 2).mean())
 
 
-def right_region(prediction, disparity_right: np.ndarray, row_margin: float = 0.0) -> np.ndarray:
+def right_region(prediction, disparity_right: np.ndarray, row_margin: float = 0.0,
+                 columns: tuple[int, int] | None = None) -> np.ndarray:
     """The plane's pixels in the right image: right-reference disparities inside the plane's band.
 
     A right pixel ``x`` with disparity ``d`` sees the left column ``x + d``, where the band is tested.
+    ``columns`` (first, last) limits the work to a window of right-image columns; the mask is (H, W).
     """
     H, W = disparity_right.shape
-    xs = np.arange(W, dtype=float)[None, :]
+    c0, c1 = (0, W - 1) if columns is None else (max(0, int(columns[0])), min(W - 1, int(columns[1])))
+    out = np.zeros((H, W), dtype=bool)
+    if c1 < c0:
+        return out
+    v0 = max(0, int(np.floor(prediction.v_top.min() - row_margin)))
+    v1 = min(H - 1, int(np.ceil(prediction.v_bottom.max() + row_margin)))
+    if v1 < v0:
+        return out
+    sub = disparity_right[v0 : v1 + 1, c0 : c1 + 1]
+    xs = np.arange(c0, c1 + 1, dtype=float)[None, :]
     with np.errstate(invalid="ignore"):
-        u_left = xs + disparity_right
+        u_left = xs + sub
         d_pred = np.interp(u_left, prediction.columns, prediction.d, left=np.nan, right=np.nan)
         s_pred = np.interp(u_left, prediction.columns, prediction.sigma_d, left=np.nan, right=np.nan)
-        ok = np.abs(disparity_right - d_pred) <= prediction.gate * s_pred
+        ok = np.abs(sub - d_pred) <= prediction.gate * s_pred
         vt = np.interp(u_left, prediction.columns, prediction.v_top)
         vb = np.interp(u_left, prediction.columns, prediction.v_bottom)
-    rows = np.arange(H, dtype=float)[:, None]
-    return ok & (rows >= vt - row_margin) & (rows <= vb + row_margin)
+    rows = np.arange(v0, v1 + 1, dtype=float)[:, None]
+    out[v0 : v1 + 1, c0 : c1 + 1] = ok & (rows >= vt - row_margin) & (rows <= vb + row_margin)
+    return out
 
 
 def search_boundary(
@@ -241,7 +253,9 @@ def search_boundary(
     snapped = False
     regions = [fit.region, None]
     if disparity_right is not None:
-        regions[1] = right_region(pred, disparity_right, plane_config.row_margin_px)
+        lo_r, hi_r = e.window(1, config.search_sigma)
+        regions[1] = right_region(pred, disparity_right, plane_config.row_margin_px,
+                                  (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
     for img in (0, 1):
         outward = -1 if e.u[img] < u_inner[img] else 1
         lo, hi = e.window(img, config.search_sigma)

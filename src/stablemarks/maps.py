@@ -24,6 +24,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -49,25 +50,25 @@ class ReferencePlane:
     visible_from: str = "both"
     reference: bool = True
 
-    @property
+    @cached_property
     def P1(self) -> np.ndarray:
         return np.asarray(self.p1, dtype=float)
 
-    @property
+    @cached_property
     def P2(self) -> np.ndarray:
         return np.asarray(self.p2, dtype=float)
 
-    @property
+    @cached_property
     def length(self) -> float:
         """``d_M`` of Eq 15 [m]."""
         return float(np.linalg.norm(self.P2 - self.P1))
 
-    @property
+    @cached_property
     def direction(self) -> np.ndarray:
         """Unit vector from ``p1`` to ``p2``."""
         return (self.P2 - self.P1) / self.length
 
-    @property
+    @cached_property
     def normal(self) -> np.ndarray:
         """Unit normal to the left of ``p1 → p2``."""
         t = self.direction

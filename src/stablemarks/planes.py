@@ -338,25 +338,32 @@ def fit_plane(
         return FailedFit(plane, f"{len(us)} disparity pixels in the predicted band (need {config.min_pixels})", len(us))
     if len(np.unique(us)) < config.min_columns:
         return FailedFit(plane, "band pixels span too few columns", len(us))
+    # Fit on every other row and column (neighbouring pixels share their SAD window anyway), then
+    # classify every band pixel with the final line.
+    sub = np.flatnonzero(((vs % 2) == 0) & ((us % 2) == 0))
+    if len(sub) < config.min_pixels // 4:
+        sub = np.arange(len(us))
     d = disparity[vs, us].astype(float)
     P, w = pixels_to_world(camera, X, us.astype(float), d)
     fb = camera.f * camera.baseline
     Z = fb / d
     sigma_Z = Z**2 / fb * config.sigma_nu(camera)
-    s = plane.along(P)
-    o = plane.offset(P)
-    sigma_o = np.abs(w @ plane.normal) * sigma_Z + 1e-6
+    s_all = plane.along(P)
+    o_all = plane.offset(P)
+    sigma_all = np.abs(w @ plane.normal) * sigma_Z + 1e-6
+    s, o, sigma_o = s_all[sub], o_all[sub], sigma_all[sub]
     # Robust start: the median offset, then reweighted least squares with outlier rejection.
     inl = np.ones(len(s), dtype=bool)
     a, b = float(np.median(o)), 0.0
     s0 = float(np.median(s))
+    scale = 1.0
     for _ in range(4):
         r = (o - a - b * (s - s0)) / sigma_o
         # the data's own spread, not the model's σ: disparity noise is often below σ_ν, and clutter
         # a few tens of cm in front of a wall is then still separable
         scale = max(1e-3, 1.4826 * float(np.median(np.abs(r[inl]))))
         inl = np.abs(r) <= config.outlier_sigma * scale
-        if inl.sum() < config.min_pixels // 2:
+        if inl.sum() < max(3, len(sub) * config.min_pixels // (2 * len(us))):
             return FailedFit(plane, "too few pixels agree on one wall line", len(us))
         wgt = 1.0 / sigma_o[inl] ** 2
         s0 = float(np.sum(wgt * s[inl]) / np.sum(wgt))
@@ -368,10 +375,14 @@ def fit_plane(
     r = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
     dof = max(1, int(inl.sum()) - 2)
     chi2_dof = float(r @ r) / dof
-    cov_R = np.linalg.inv(N) * max(1.0, chi2_dof) * config.correlation_px
+    # one independent measurement per `correlation_px` pixels of the full band (the subsample carries
+    # len(sub)/len(us) of its information)
+    cov_R = np.linalg.inv(N) * max(1.0, chi2_dof) * config.correlation_px * len(sub) / len(us)
+    r_all = (o_all - a - b * (s_all - s0)) / sigma_all
+    keep = np.abs(r_all) <= config.outlier_sigma * scale
     region = np.zeros_like(band)
-    region[vs[inl], us[inl]] = True
-    return PlaneFit(plane, prediction, float(a), float(b), s0, cov_R, region, len(us), int(inl.sum()), chi2_dof,
+    region[vs[keep], us[keep]] = True
+    return PlaneFit(plane, prediction, float(a), float(b), s0, cov_R, region, len(us), int(keep.sum()), chi2_dof,
                     np.asarray(X, dtype=float))
 
 

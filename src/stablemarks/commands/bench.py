@@ -1,0 +1,80 @@
+"""``stablemarks bench``: per-stage speed against OpenCV's StereoBM and the EKF against filterpy."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from rich.table import Table
+
+from ._common import make_console
+
+NAME = "bench"
+HELP = "time every stage against OpenCV StereoBM, the EKF update against filterpy, and memory per frame"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    p.add_argument("--repeats", type=int, default=15, help="timed runs per stage (median; default 15)")
+    p.add_argument("--sizes", default="10,100,500,1000,2000", help="landmark counts of the EKF comparison")
+    p.add_argument("--memory-frames", type=int, default=0, metavar="N",
+                   help="also trace memory over the first N frames of the `loop` scenario (default: skip)")
+
+
+def run(args) -> int:
+    from ..bench import ekf_vs_filterpy, memory_profile, stage_times
+    from ..errors import InputError, expected
+
+    console = make_console()
+    try:
+        sizes = tuple(int(v) for v in args.sizes.split(","))
+    except ValueError:
+        raise InputError(expected("comma-separated landmark counts", args.sizes, where="--sizes")) from None
+    if args.repeats < 1:
+        raise InputError(expected("a positive number of runs", args.repeats, where="--repeats"))
+    console.print("single-threaded (BLAS, OpenCV, numba), median of repeated runs on a rendered 640×480 lab pair")
+    stages = stage_times(args.repeats)
+    t = Table(title="per-frame time, 640×480, 64 disparities")
+    t.add_column("stage")
+    t.add_column("ms", justify="right")
+    t.add_column("× one StereoBM call", justify="right")
+    for key, label in (("stereobm", "OpenCV StereoBM (15×15, 64 disp.), reference"),
+                       ("segments", "vertical segments, both images"), ("matching", "segment matching (DP)"),
+                       ("disparity", "SAD both directions + L-R check"), ("filter", "disparity filter"),
+                       ("planes", "plane prediction + fit"), ("landmarks", "boundary, model, selection"),
+                       ("ekf", "EKF association + update"), ("front_end", "front end (first four)"),
+                       ("pipeline", "whole per-frame pipeline")):
+        ms = stages[f"{key}_ms"]
+        t.add_row(label, f"{ms:.1f}", f"{ms / stages['stereobm_ms']:.2f}")
+    console.print(t)
+    out = {"stages": stages, **{k: v for k, v in stages.items() if k.startswith("ratio_")}}
+    ekf = ekf_vs_filterpy(sizes)
+    if "skipped" in ekf:
+        console.print(f"[yellow]EKF comparison skipped:[/] {ekf['skipped']}")
+    else:
+        t = Table(title="EKF update (6 observations) vs filterpy's ExtendedKalmanFilter, same numbers")
+        for col in ("landmarks", "ours ms", "filterpy ms", "speed-up", "max |difference|"):
+            t.add_column(col, justify="right")
+        for r in ekf["rows"]:
+            t.add_row(str(r["landmarks"]), f"{r['ours_ms']:.2f}", f"{r['filterpy_ms']:.2f}", f"{r['ratio']:.1f}×",
+                      f"{r['max_abs_diff']:.1e}")
+        console.print(t)
+        out["ekf"] = ekf
+        if "ratio_ekf_vs_filterpy_1000" in ekf:
+            out["ratio_ekf_vs_filterpy_1000"] = ekf["ratio_ekf_vs_filterpy_1000"]
+        out["max_abs_diff"] = ekf["max_abs_diff"]
+    if args.memory_frames:
+        mem = memory_profile(args.memory_frames)
+        out["memory"] = mem
+        console.print(
+            f"memory over {mem['frames']} frames of `{mem['scenario']}`: traced peak per frame "
+            f"{mem['peak_mb_first_quarter']:.1f} MB (first quarter) vs {mem['peak_mb_last_quarter']:.1f} MB "
+            f"(last quarter), max {mem['peak_mb_max']:.1f} MB; landmarks {mem['landmarks_first_quarter']:.0f} → "
+            f"{mem['landmarks_last_quarter']:.0f}"
+        )
+    console.print(f"ratio_pipeline_vs_stereobm = {stages['ratio_pipeline_vs_stereobm']:.2f}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=2))
+        console.print(f"wrote {args.json}")
+    return 0

@@ -1,52 +1,130 @@
-"""``stablemarks run``: the on-line loop on a recorded sequence (or any supported recording)."""
+"""``stablemarks run``: the on-line loop on a recorded run: our sequence folder, a ROS bag, or a KITTI or
+EuRoC dataset folder."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError, expected
 from ._common import make_console, parse_triplet
 
 NAME = "run"
-HELP = "run on-line landmark selection and EKF localization on a recorded sequence"
+HELP = "run on-line landmark selection and EKF localization on a recorded sequence, bag or dataset"
+DESCRIPTION = (
+    "Run the on-line loop (predict with odometry, segment stereo, associate and update, select new landmarks) "
+    "on SOURCE: a sequence folder (sequence.yaml, as `stablemarks simulate` writes), a ROS 1 bag (.bag) or "
+    "ROS 2 bag (folder with metadata.yaml, or a .db3/.mcap file) with --left-topic, --right-topic, --odom-topic, "
+    "--calib and --map, a KITTI odometry sequence folder or a EuRoC MAV folder (with --map and odometry). "
+    "Writes OUT/trajectory.tum (evo-ready, stamps as recorded), dead_reckoning.tum, landmarks.yaml, log.jsonl, "
+    "config.yaml (the resolved configuration) and Figure 10."
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("source", metavar="DIR", help="recorded sequence folder (see README)")
-    p.add_argument("--out", metavar="OUT", help="output folder (default: results/<sequence name>)")
+    p.add_argument("source", metavar="SOURCE",
+                   help="sequence folder, bag (.bag, .db3, .mcap or ROS 2 bag folder), KITTI or EuRoC folder")
+    p.add_argument("--out", metavar="OUT", help="output folder (default: results/<source name>)")
     p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README)")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override one setting on top of --config, e.g. --set ekf.max_updates_per_frame=4 (repeatable)")
     p.add_argument("--method", default="stablemarks",
                    choices=["stablemarks", "plane_no_selection", "all_segments", "dead_reckoning"],
                    help="which method to run (default: stablemarks, the full method)")
-    p.add_argument("--pose", metavar="X,Y,THETA", help="start pose (default: the sequence's initial pose)")
+    p.add_argument("--pose", metavar="X,Y,THETA",
+                   help="start pose in the map (default: the sequence's initial pose; for bags and datasets the "
+                        "first odometry pose)")
     p.add_argument("--pose-sigma", default="0.05,0.05,1deg", metavar="SX,SY,STHETA",
                    help="standard deviations of the start pose (default 0.05,0.05,1deg)")
     p.add_argument("--prior-landmarks", metavar="landmarks.yaml",
                    help="a landmark map written by an earlier run, to start from")
-    p.add_argument("--no-figures", action="store_true", help="skip Figure 10")
+    g = p.add_argument_group("recordings (bags and dataset folders)")
+    g.add_argument("--calib", metavar="DIR|FILE",
+                   help="calibration: folder with left.yaml and right.yaml (ROS camera_info) or an OpenCV file")
+    g.add_argument("--camera", metavar="MOUNT.yaml",
+                   help="the stereo head's mount on the robot (default: mount.yaml beside the calibration)")
+    g.add_argument("--map", metavar="MAP", help="map of walls: our map YAML, a ROS map_server map.yaml, or GeoJSON")
+    g.add_argument("--left-topic", metavar="TOPIC", help="bag: left image topic (sensor_msgs/Image or CompressedImage)")
+    g.add_argument("--right-topic", metavar="TOPIC", help="bag: right image topic")
+    g.add_argument("--odom-topic", metavar="TOPIC", help="bag: wheel odometry topic (nav_msgs/Odometry)")
+    g.add_argument("--pan-topic", metavar="TOPIC",
+                   help="bag: head pan topic (std_msgs/Float64 or sensor_msgs/JointState; default: the mount's pan)")
+    g.add_argument("--pan-joint", metavar="NAME", help="bag: the pan joint's name in --pan-topic's joint states")
+    g.add_argument("--odometry", metavar="CSV",
+                   help="KITTI/EuRoC: odometry CSV (stamp,x,y,theta; default: odometry.csv in the folder)")
+    g.add_argument("--sync-tolerance", type=float, default=0.005, metavar="SECONDS",
+                   help="largest stamp difference within a stereo pair and to the odometry (default 0.005)")
+    o = p.add_argument_group("outputs")
+    o.add_argument("--kitti", action="store_true", help="also write trajectory.kitti (KITTI odometry format)")
+    o.add_argument("--save-rrd", metavar="FILE",
+                   help="also write a rerun recording (needs pip install 'stablemarks[rerun]')")
+    o.add_argument("--no-figures", action="store_true", help="skip Figure 10")
+
+
+def parse_overrides(items: list[str]) -> dict:
+    """``["ekf.max_updates_per_frame=4", …]`` → ``{"ekf": {"max_updates_per_frame": 4}}`` (values read as YAML)."""
+    import yaml
+
+    out: dict = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        section, dot, name = key.strip().partition(".")
+        if not (sep and dot and section and name and text.strip()):
+            raise InputError(expected("SECTION.KEY=VALUE", item, where="--set"))
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError:
+            raise InputError(expected("a YAML value after '='", item, where="--set")) from None
+        out.setdefault(section, {})[name] = value
+    return out
 
 
 def run(args) -> int:
     from ..config import load_config
     from ..io.results import write_run
     from ..io.sources import open_source
+    from ..io.trajectory import write_kitti
     from ..maps import read_yaml
     from ..online import run_online
     from ._report import frame_progress, print_motion_summary
 
     console = make_console()
     config = load_config(args.config)
+    if args.set:
+        config = config.with_overrides(parse_overrides(args.set), "--set")
+    if args.save_rrd:
+        from ..io.rerun_log import require_rerun
+
+        require_rerun()
     start = parse_triplet(args.pose, "x, y, theta", "--pose") if args.pose else None
     sigma = parse_triplet(args.pose_sigma, "σx, σy, σθ", "--pose-sigma")
     prior = read_yaml(args.prior_landmarks, "landmark map") if args.prior_landmarks else None
-    source = open_source(args.source, start_pose=start)
-    out = Path(args.out) if args.out else Path("results") / source.name
-    with frame_progress(console, f"{source.name}: {len(source)} frames", len(source)) as progress:
-        result = run_online(source, cov0=np.diag(sigma**2), config=config, method=args.method,
-                            prior_landmarks=prior, progress=progress)
+    with contextlib.ExitStack() as stack:
+        source = open_source(args.source, left_topic=args.left_topic, right_topic=args.right_topic,
+                             odom_topic=args.odom_topic, pan_topic=args.pan_topic, pan_joint=args.pan_joint,
+                             calib=args.calib, map=args.map, mount=args.camera, odometry=args.odometry,
+                             tolerance=args.sync_tolerance, start_pose=start)
+        if hasattr(source, "close"):
+            stack.callback(source.close)
+        for note in getattr(source, "notes", ()):
+            console.print(f"note: {note}")
+        out = Path(args.out) if args.out else Path("results") / source.name
+        with frame_progress(console, f"{source.name}: {len(source)} frames", len(source)) as progress:
+            result = run_online(source, cov0=np.diag(sigma**2), config=config, method=args.method,
+                                prior_landmarks=prior, progress=progress)
+        rrd = None
+        if args.save_rrd:
+            from ..io.rerun_log import save_rrd
+
+            rrd = save_rrd(args.save_rrd, result, source, config)
     paths = write_run(out, result, config)
+    if args.kitti:
+        paths["kitti"] = write_kitti(out / "trajectory.kitti", result.poses)
+    if rrd is not None:
+        paths["rrd"] = rrd
     if not args.no_figures:
         from ..viz.trajectory import figure10
 

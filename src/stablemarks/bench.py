@@ -54,6 +54,7 @@ def stage_times(repeats: int = 15) -> dict:
     from .config import Config
     from .estimation import JointEKF, NewLandmark
     from .landmarks import landmarks_on_plane
+    from .pipeline import valid_columns
     from .planes import fit_plane, predict_planes
     from .vision.area_stereo import compute_disparity
     from .vision.filter import filter_pairs
@@ -96,8 +97,9 @@ def stage_times(repeats: int = 15) -> dict:
         out["planes"] = median_time(planes, repeats)
 
         def model():
+            cols = valid_columns(disp)
             return [landmarks_on_plane(camera, fit, kept_pairs, seg_l, disp.right, config.landmarks,
-                                       config.planes, float(config.sad.block_size)) for fit in fits if fit]
+                                       config.planes, float(config.sad.block_size), cols) for fit in fits if fit]
 
         models = model()
         out["landmarks"] = median_time(model, repeats)

@@ -666,6 +666,10 @@ class JointEKF:
         nu = (z - uv).reshape(-1)
         return float(nu @ np.linalg.solve(S, nu))
 
+    def joint_compatible(self, pairs: Sequence[tuple[int, int]], measured, pan: float = 0.0) -> bool:
+        """Whether the pairs' joint NIS lies inside the χ² gate of ``2·len(pairs)`` dof."""
+        return self.joint_nis(pairs, measured, pan) <= chdtri(2 * len(pairs), 1.0 - self.config.gate_probability)
+
     def associate_joint(self, measured, pan: float = 0.0, candidates: Sequence[int] | None = None,
                         extra_cost=None) -> list[tuple[int, int]]:
         """One-to-one association whose pairs are *jointly* compatible.

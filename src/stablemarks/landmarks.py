@@ -252,7 +252,7 @@ def search_boundary(
     rows_used = 0
     snapped = False
     regions = [fit.region, None]
-    if disparity_right is not None:
+    if disparity_right is not None and np.all(np.isfinite(e.u)):
         lo_r, hi_r = e.window(1, config.search_sigma)
         regions[1] = right_region(pred, disparity_right, plane_config.row_margin_px,
                                   (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
@@ -394,16 +394,29 @@ def landmarks_on_plane(
     config: LandmarkConfig = LandmarkConfig(),
     plane_config: PlaneConfig = PlaneConfig(),
     window_px: float = 15.0,
+    valid_columns: tuple[tuple[float, float], tuple[float, float]] | None = None,
 ) -> PlaneLandmarks:
-    """Members, boundary search at every free edge in the window, relative model and selection."""
+    """Members, boundary search at every free edge in the window, relative model and selection.
+
+    ``valid_columns``: for the left and the right image, the first and last column where the disparity
+    image can hold a match. An edge whose search window reaches beyond them is not searched: the region
+    would end there at the image's (or the disparity range's) border, not at the plane's edge.
+    """
     members = plane_members(fit, pairs, left_segments, plane_config)
     idx = np.flatnonzero(members)
     members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
     boundaries = []
     for edge in fit.plane.free_edges:
         e = fit.prediction.edges[edge]
+        if not np.all(np.isfinite(e.u)):  # the edge is behind the camera
+            continue
         lo, hi = e.window(0, config.search_sigma)
         if hi < 0 or lo > camera.width - 1:
+            continue
+        windows = [e.window(img, config.search_sigma) for img in (0, 1)]
+        if valid_columns is not None and any(
+            not (vc[0] + 1 < w[0] and w[1] < vc[1] - 1) for w, vc in zip(windows, valid_columns, strict=True)
+        ):
             continue
         b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px)
         if b is not None:

@@ -31,9 +31,13 @@ METHODS = ("stablemarks", "plane_no_selection", "all_segments", "dead_reckoning"
 
 # ---------------------------------------------------------------- sources
 class SimulatedSource:
-    """A scenario's run, rendered frame by frame with the pan the loop commands (truth available)."""
+    """A scenario's run, rendered frame by frame with the pan the loop commands (truth available).
 
-    def __init__(self, run, renderer=None, stamp_step: float = 0.5):
+    The robot believes it starts at the true start, or — with ``initial_error_cov`` (3, 3) — at the true
+    start plus an error drawn from that covariance (seeded by the run's seed), as a consistency test needs.
+    """
+
+    def __init__(self, run, renderer=None, stamp_step: float = 0.5, initial_error_cov=None):
         from .sim.render import renderer_for
 
         self.run = run
@@ -42,6 +46,10 @@ class SimulatedSource:
         self.camera: StereoCamera = run.scenario.camera
         self.world_map: Map = run.scenario.map
         self.start_pose = run.poses[0].as_array()
+        if initial_error_cov is not None:
+            rng = np.random.default_rng(np.random.SeedSequence(run.seed, spawn_key=(2,)))
+            L = np.linalg.cholesky(np.asarray(initial_error_cov, dtype=float) + 1e-15 * np.eye(3))
+            self.start_pose = SE2.from_array(self.start_pose + L @ rng.normal(size=3)).as_array()
         self.renderer = renderer or renderer_for(run.scenario)
         self.stamp_step = stamp_step
         self.recorded_pan = False
@@ -302,9 +310,19 @@ def run_online(
             n_pairs = len(pairs)
             t2 = time.perf_counter()
             used_pairs: set[int] = set()
+            cam_k = camera.with_pan(pan)
+            sel = None
+            if method != "all_segments":
+                # the frame's own model first: positions along the walls, independent of the pose error
+                sel = select_landmarks(front, cam_k, world_map, ekf.pose, ekf.cov_pose, config)
+                if first_view is None:
+                    first_view = sel
+                warnings = sel.warnings
+                n_cand = len(sel.candidates)
+                n_sel = len(sel.selected)
             if ekf.n_landmarks and n_pairs:
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
-                assoc = ekf.associate_joint(measured, pan)
+                assoc = associate_frame(ekf, pairs, measured, pan, sel)
                 associated = [int(i) for i, _ in assoc]
                 used_pairs = {int(j) for _, j in assoc}
                 chosen = ekf.select_for_update(assoc, pan)
@@ -314,17 +332,10 @@ def run_online(
                     nis = [float(v) for v in res.nis]
             t3 = time.perf_counter()
             timings.update(associate_update=t3 - t2)
-            cam_k = camera.with_pan(pan)
             if method == "all_segments":
                 idx = [j for j in range(n_pairs) if j not in used_pairs]
                 new_ids = _new_point_landmarks(ekf, cam_k, pairs, idx, k)
             else:
-                sel = select_landmarks(front, cam_k, world_map, ekf.pose, ekf.cov_pose, config)
-                if first_view is None:
-                    first_view = sel
-                warnings = sel.warnings
-                n_cand = len(sel.candidates)
-                n_sel = len(sel.selected)
                 take = sel.candidates if method == "plane_no_selection" else sel.selected
                 fresh = [c for c in take if c.pair not in used_pairs and not _duplicate(ekf, c)]
                 new_ids = _new_wall_landmarks(ekf, world_map, fresh, k)
@@ -361,12 +372,128 @@ def run_online(
     return OnlineResult(source.name, method, records, ekf, world_map, first_view, truth_of, rejected_truth, cov0)
 
 
+def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, model=None) -> list[tuple[int, int]]:
+    """Pairs (landmark id, segment-pair index) for this frame's update.
+
+    Wall landmarks are found by the *pattern* of this frame's candidates along each wall (their positions
+    relative to the wall's edge do not depend on the pose error, and the offsets between features on one
+    wall are known to a few mm): :func:`match_along_wall`, kept if jointly compatible. Point landmarks, and
+    wall landmarks the pattern leaves unmatched, go through the image-space association with joint
+    compatibility and the vertical-extent cost; each such pair is added only if the whole set stays
+    jointly compatible.
+    """
+    pattern: list[tuple[int, int]] = []
+    if model is not None:
+        for plane_model in model.planes:
+            pattern += match_along_wall(ekf, plane_model.fit.plane, plane_model.candidates)
+    in_view = set(ekf.visible(pan))
+    pattern = [(i, c) for i, c in pattern if i in in_view]
+    if pattern and not ekf.joint_compatible(pattern, measured, pan):
+        pattern = []
+    chosen = list(pattern)
+    taken_l = {i for i, _ in chosen}
+    taken_p = {j for _, j in chosen}
+    rest = [i for i in ekf.landmark_ids if i not in taken_l]
+    free = [j for j in range(len(measured)) if j not in taken_p]
+    if rest and free:
+        cost = _height_cost(ekf, pairs, pan)
+        rows = [ekf.landmark_ids.index(i) for i in rest]
+        sub = ekf.associate_joint(measured[free], pan, candidates=rest, extra_cost=cost[np.ix_(rows, free)])
+        for i, j in sub:
+            trial = chosen + [(i, free[j])]
+            if ekf.joint_compatible(trial, measured, pan):
+                chosen = trial
+    return sorted(chosen, key=lambda q: q[1])
+
+
+def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0) -> list[tuple[int, int]]:
+    """Match this frame's candidates on ``plane`` with the wall landmarks on it, by their pattern.
+
+    Candidates and landmarks are placed along the wall (from ``p1``). The two sets differ by one common
+    offset — the difference of the boundary errors, ``σ_δ² = σ_b,now² + var_landmark`` — and by each
+    feature's own small error. Every candidate-landmark pair proposes an offset within ``3σ_δ``; the offset
+    that matches the most features (ties: least squared residual) wins, and features are then paired
+    one-to-one within ``tol`` σ of their own errors. Features whose vertical extents disagree never match;
+    among offsets that match equally many, the likeliest one (its own prior and the residuals) wins.
+    Returns ``(landmark id, segment-pair index)``.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    lms = [ekf.landmark(i) for i in ekf.landmark_ids]
+    lms = [lm for lm in lms if lm.kind == "wall" and lm.plane_id == plane.id]
+    if not lms or not candidates:
+        return []
+    a = np.array([float(plane.along(lm.position)) for lm in lms])
+    var_a = np.array([float(lm.cov[0, 0]) for lm in lms])
+    c = np.array([float(plane.along(cd.P)) for cd in candidates])
+    sf = np.array([cd.sigma_f for cd in candidates])
+    sb = max(cd.sigma_b for cd in candidates)
+    # heights must agree: one vertical extent (mostly) inside the other (a segment may be seen in part)
+    zl = np.array([[lm.z_low if lm.z_low is not None else -np.inf for lm in lms]])
+    zh = np.array([[lm.z_high if lm.z_high is not None else np.inf for lm in lms]])
+    cl = np.array([[cd.z_low] for cd in candidates])
+    ch = np.array([[cd.z_high] for cd in candidates])
+    inter = np.clip(np.minimum(zh, ch) - np.maximum(zl, cl), 0.0, None)
+    shorter = np.maximum(np.minimum(zh - zl, ch - cl), 1e-3)
+    same_height = inter / shorter >= 0.5
+    best = None
+    for i in range(len(c)):
+        for j in range(len(a)):
+            delta = a[j] - c[i]
+            if abs(delta) > 3.0 * np.sqrt(sb**2 + var_a[j]):
+                continue
+            resid = (c[:, None] + delta) - a[None, :]
+            # a feature's own error against its landmark's: the landmark's spread beyond the shared offset
+            # is not known apart from var_a, so allow the candidate's σ_f and a few mm of the landmark's
+            scale = tol * np.sqrt(sf[:, None] ** 2 + np.minimum(var_a[None, :], (2 * sf[:, None]) ** 2) + 1e-6)
+            ok = (np.abs(resid) <= scale) & same_height
+            # most features matched; then the likeliest offset and residuals
+            prior = delta**2 / (sb**2 + float(np.mean(var_a)))
+            score = (int(ok.any(axis=1).sum()), -prior - float(np.sum(np.where(ok, (resid / scale) ** 2, 0.0))))
+            if best is None or score > best[0]:
+                best = (score, delta, resid, ok)
+    if best is None:
+        return []
+    _, delta, resid, ok = best
+    big = 1e6
+    rows, cols = linear_sum_assignment(np.where(ok, resid**2, big))
+    return [(int(lms[j].id), int(candidates[i].pair)) for i, j in zip(rows, cols, strict=True) if ok[i, j]]
+
+
+def _height_cost(ekf: JointEKF, pairs, pan: float, weight: float = 9.0) -> np.ndarray:
+    """(n_landmarks, n_pairs) association cost from the vertical extents: ``weight·(1 − IoU)`` of a pair's
+    rows and the rows of the landmark's ends at its predicted depth (clipped to the image). Lines of other
+    heights or lengths cost up to ``weight`` more: regularly spaced features are told apart by their extents
+    when the pose error alone cannot (a whole group matched one feature over is jointly compatible)."""
+    ids = ekf.landmark_ids
+    cost = np.zeros((len(ids), len(pairs)))
+    if not ids or not len(pairs):
+        return cost
+    cam = ekf.camera
+    pred = ekf.predict_observation(ids, pan)
+    d = pred.uv[:, 0] - pred.uv[:, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        Z = cam.f * cam.baseline / d
+    for j, i in enumerate(ids):
+        lm = ekf.landmark(i)
+        if lm.z_low is None or lm.z_high is None or not np.isfinite(Z[j]) or Z[j] <= 0:
+            continue
+        vt = np.clip(cam.cv + cam.f * (cam.mount_height - lm.z_high) / Z[j], 0.0, cam.height - 1.0)
+        vb = np.clip(cam.cv + cam.f * (cam.mount_height - lm.z_low) / Z[j], 0.0, cam.height - 1.0)
+        inter = np.clip(np.minimum(vb, pairs.v_bottom) - np.maximum(vt, pairs.v_top), 0.0, None)
+        union = np.maximum(np.maximum(vb, pairs.v_bottom) - np.minimum(vt, pairs.v_top), 1.0)
+        cost[j] = weight * (1.0 - inter / union)
+    return cost
+
+
 def _duplicate(ekf: JointEKF, c) -> bool:
-    """Whether a wall landmark on the same plane and edge already explains candidate ``c`` (3σ)."""
+    """Whether a wall landmark on the same plane (measured from either edge) already explains candidate
+    ``c``: their positions along the wall agree within 3σ."""
     for i in ekf.landmark_ids:
         lm = ekf.landmark(i)
-        if lm.kind != "wall" or lm.plane_id != c.plane_id or lm.edge != c.edge:
+        if lm.kind != "wall" or lm.plane_id != c.plane_id:
             continue
-        if abs(float(lm.value[0]) - c.s) <= 3.0 * np.sqrt(float(lm.cov[0, 0]) + c.sigma_s**2):
+        gap = float(np.linalg.norm(lm.position - c.P))
+        if gap <= 3.0 * np.sqrt(float(lm.cov[0, 0]) + c.sigma_s**2):
             return True
     return False

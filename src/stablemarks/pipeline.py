@@ -81,6 +81,15 @@ def run_front_end(left: np.ndarray, right: np.ndarray, config: Config = Config()
     return FrontEnd(seg_l, seg_r, pairs, np.asarray(kept, dtype=bool), disp, t)
 
 
+def valid_columns(disparity: DisparityResult) -> tuple[tuple[float, float], tuple[float, float]]:
+    """First and last column holding any valid disparity, in the left and in the right image."""
+    out = []
+    for img in (disparity.left, disparity.right):
+        cols = np.flatnonzero(np.isfinite(img).any(axis=0))
+        out.append((float(cols[0]), float(cols[-1])) if len(cols) else (np.inf, -np.inf))
+    return out[0], out[1]
+
+
 @dataclass(frozen=True)
 class FrameLandmarks:
     """Planes and landmark candidates of one frame.
@@ -137,7 +146,8 @@ def select_landmarks(
             )
             continue
         model = landmarks_on_plane(camera, fit, pairs, front.left_segments, front.disparity.right,
-                                   config.landmarks, config.planes, float(config.sad.block_size))
+                                   config.landmarks, config.planes, float(config.sad.block_size),
+                                   valid_columns(front.disparity))
         t_model += time.perf_counter() - tb
         if fit.plane.free_edges and not model.boundaries:
             warnings.append(f"plane {fit.plane.label!r}: no free edge found in view; its features are not modelled")

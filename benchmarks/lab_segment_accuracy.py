@@ -39,7 +39,8 @@ def main() -> None:
                 pairs_ok += bool(((np.abs(p.u_left - e.u_l) < 1.0) & (np.abs(p.u_right - e.u_r) < 1.0)).any())
     errs = np.array(errs)
     print(f"lab frames 0, 10, 20: {found}/{total} true edges of the two planes found as segments; column error "
-          f"median {np.median(errs):.3f} px, 95th percentile {np.percentile(errs, 95):.3f} px, max {errs.max():.3f} px; "
+          f"median {np.median(errs):.3f} px, 95th percentile {np.percentile(errs, 95):.3f} px, "
+          f"max {errs.max():.3f} px; "
           f"{pairs_ok}/{pairs_total} true stereo pairs matched and kept (both columns within 1 px)")
 
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import Config
+from .errors import InputError, expected
 from .estimation import JointEKF, NewLandmark
 from .geometry import SE2, StereoCamera
 from .maps import Map
@@ -227,37 +228,26 @@ def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int) -
 
 
 def _new_point_landmarks(ekf: JointEKF, camera: StereoCamera, pairs, idx, frame: int) -> list[int]:
-    """Classic stereo EKF-SLAM initialisation of 2-D point landmarks with their pose cross-covariance."""
+    """Classic stereo EKF-SLAM initialisation of 2-D point landmarks: ``p = g(X, z)`` with
+    ``Σ_pp = G_X P_XX G_Xᵀ + G_z R G_zᵀ`` (points triangulated from one pose share its error) and
+    ``Σ_Xp = P_XX G_Xᵀ``."""
     X = ekf.pose
-    P_XX = ekf.cov_pose
-    new, blocks, cross = [], [], []
+    new, cov_z, J_X = [], [], []
     for k in idx:
-        p, cov_z = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
+        p, cov = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
         if not np.all(np.isfinite(p)):
             continue
         Xc, Zc = camera.to_camera(X, p)
-        J_X = camera.triangulation_jacobian_pose(X, Xc, Zc)
-        blocks.append(cov_z + J_X @ P_XX @ J_X.T)
-        cross.append(P_XX @ J_X.T)
         new.append(NewLandmark.point(p))
+        cov_z.append(cov)
+        J_X.append(camera.triangulation_jacobian_pose(X, Xc, Zc))
     if not new:
         return []
-    D = 2 * len(new)
-    C = np.zeros((D, D))
-    Jall = []
-    for i, b in enumerate(blocks):
-        C[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = b
-        Jall.append(cross[i])
-    # points triangulated from the same pose share its error: Cov(p_i, p_j) = J_i P_XX J_jᵀ
-    crossmat = np.concatenate(Jall, axis=1)  # (3, D) = P_XX J_allᵀ
-    J_stack = np.linalg.pinv(P_XX) @ crossmat if np.linalg.matrix_rank(P_XX) == 3 else None
-    if J_stack is not None:
-        full = J_stack.T @ P_XX @ J_stack
-        for i in range(len(new)):
-            for j in range(len(new)):
-                if i != j:
-                    C[2 * i : 2 * i + 2, 2 * j : 2 * j + 2] = full[2 * i : 2 * i + 2, 2 * j : 2 * j + 2]
-    return ekf.add_landmarks(new, C, cov_pose_new=crossmat, frame=frame)
+    G = np.concatenate(J_X, axis=0)  # (2n, 3)
+    C = G @ ekf.cov_pose @ G.T
+    for i, cz in enumerate(cov_z):
+        C[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] += cz
+    return ekf.add_landmarks(new, C, cov_pose_new=ekf.cov_pose @ G.T, frame=frame)
 
 
 def run_online(
@@ -275,8 +265,6 @@ def run_online(
     landmark map saved by a previous run (``landmarks.yaml``). ``progress(k, n)`` is called after each frame.
     """
     if method not in METHODS:
-        from .errors import InputError, expected
-
         raise InputError(expected(f"one of {', '.join(METHODS)}", method, where="method"))
     cov0 = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2 if cov0 is None else np.asarray(cov0, dtype=float)
     camera = source.camera

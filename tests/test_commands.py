@@ -3,6 +3,7 @@
 import csv
 import json
 
+import numpy as np
 import pytest
 import yaml
 
@@ -106,3 +107,25 @@ def test_run_on_a_broken_folder_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "odometry" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_stereo_writes_disparity_pairs_and_figures(rendered, tmp_path, capsys):
+    from stablemarks.io.pfm import read_pfm
+
+    out = tmp_path / "stereo"
+    assert main(["stereo", str(rendered / "frame_000000_left.png"), str(rendered / "frame_000000_right.png"),
+                 "--out", str(out)]) == 0
+    d = read_pfm(out / "disparity.pfm")
+    assert d.shape == (480, 640)
+    finite = np.isfinite(d)
+    assert 0.2 < finite.mean() < 0.95 and np.all(d[finite] >= 0) and np.all(d[finite] < 64)
+    pairs = json.loads((out / "pairs.json").read_text())
+    assert pairs and set(pairs[0]) == {"u_left", "u_right", "v_top", "v_bottom", "length_left", "length_right",
+                                       "similarity", "length_similarity", "kept"}
+    assert sum(p["kept"] for p in pairs) >= 14
+    for name in ("disparity.png", "fig5_segments.png", "fig6_disparity.png"):
+        assert (out / name).exists()
+    # a bad block size is a one-line error
+    assert main(["stereo", str(rendered / "frame_000000_left.png"), str(rendered / "frame_000000_right.png"),
+                 "--block-size", "4", "--out", str(tmp_path / "bad")]) == 1
+    assert "block_size" in capsys.readouterr().err

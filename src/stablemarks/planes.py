@@ -336,7 +336,7 @@ def fit_plane(
     vs, us = np.nonzero(band)
     if len(us) < config.min_pixels:
         return FailedFit(plane, f"{len(us)} disparity pixels in the predicted band (need {config.min_pixels})", len(us))
-    if len(np.unique(us)) < config.min_columns:
+    if np.count_nonzero(band.any(axis=0)) < config.min_columns:
         return FailedFit(plane, "band pixels span too few columns", len(us))
     # Fit on every other row and column (neighbouring pixels share their SAD window anyway), then
     # classify every band pixel with the final line.

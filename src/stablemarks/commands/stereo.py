@@ -65,6 +65,7 @@ def run(args) -> int:
         f"{len(front.left_segments)} + {len(front.right_segments)} vertical segments, {len(p)} matched pairs, "
         f"{int(front.kept.sum())} kept by the disparity check; {valid:.1%} of the pixels have a valid disparity."
     )
-    console.print("timings (ms, first call includes compiling): " + ", ".join(f"{k} {1000 * v:.1f}" for k, v in front.timings.items()))
+    times = ", ".join(f"{k} {1000 * v:.1f}" for k, v in front.timings.items())
+    console.print(f"timings (ms, the first call includes compiling): {times}")
     console.print(f"wrote {out}/disparity.pfm, disparity.png, pairs.json, fig5_segments.png, fig6_disparity.png")
     return 0

@@ -271,6 +271,9 @@ def _prefiltered(image8: np.ndarray, config: SADConfig) -> np.ndarray:
 # contiguous and increasing in k. The right image is padded on the left by pad_l columns so the
 # right pixel u sits at column u + pad_l; lane k of left column x reads right column x + off + k
 # with off = pad_l - min_disparity - (D - 1) >= 0.
+#
+# The hot loops index flat arrays with unsigned integers: numba then neither builds an array view
+# per column nor checks for negative indices, and LLVM vectorizes the loops over lanes.
 # ---------------------------------------------------------------------------------------------
 
 
@@ -282,197 +285,220 @@ def _padding(config: SADConfig) -> tuple[int, int, int]:
 
 
 @njit(cache=True, boundscheck=False)
-def _accumulate_columns(colsum, l_add, r_add, l_sub, r_sub, off, subtract):  # pragma: no cover - numba
-    """Slide the column sums down one row: ``colsum[x, k] += |l_add[x] − r_add[x+off+k]|``, minus the same
-    for the row that leaves the window when ``subtract``."""
-    n_cols, n_disp = colsum.shape
+def _accumulate_columns(colsum, left, right, row_add, row_sub, n_cols, n_padded, off, subtract):  # pragma: no cover
+    """Slide the column sums (W·D, flat) down one row: ``colsum[x, k] += |L[row_add, x] − R[row_add, x+off+k]|``,
+    minus the same for ``row_sub`` when ``subtract``; ``left`` (H·W) and ``right`` (H·W_padded) flat."""
+    n_disp = np.uint64(colsum.shape[0]) // n_cols
     for x in range(n_cols):
-        b = x + off
-        ra = r_add[b : b + n_disp]
-        la = l_add[x]
-        cs = colsum[x]
+        cb = x * n_disp
+        la = left[row_add * n_cols + x]
+        ra = row_add * n_padded + x + off
         if subtract:
-            rs = r_sub[b : b + n_disp]
-            ls = l_sub[x]
+            ls = left[row_sub * n_cols + x]
+            rs = row_sub * n_padded + x + off
             for k in range(n_disp):
-                cs[k] += abs(np.int16(la - ra[k])) - abs(np.int16(ls - rs[k]))
+                colsum[cb + k] += abs(np.int16(la - right[ra + k])) - abs(np.int16(ls - right[rs + k]))
         else:
             for k in range(n_disp):
-                cs[k] += abs(np.int16(la - ra[k]))
+                colsum[cb + k] += abs(np.int16(la - right[ra + k]))
 
 
 @njit(cache=True, boundscheck=False)
-def _window_costs(costrow, colsum, r):  # pragma: no cover - numba
-    """Box sums along the row: ``costrow[x] = Σ_{x' = x−r}^{x+r} colsum[x']`` for ``r <= x < W − r``."""
-    n_cols, n_disp = colsum.shape
-    first = costrow[r]
-    first[:] = 0
-    for x in range(2 * r + 1):
-        cs = colsum[x]
-        for k in range(n_disp):
-            first[k] += cs[k]
-    for x in range(r + 1, n_cols - r):
-        prev = costrow[x - 1]
-        cur = costrow[x]
-        add = colsum[x + r]
-        sub = colsum[x - r - 1]
-        for k in range(n_disp):
-            cur[k] = prev[k] + add[k] - sub[k]
-
-
-@njit(cache=True, boundscheck=False)
-def _row_costs(costrow, colsum, left, right_pad, y, r, off):  # pragma: no cover - numba
-    """Costs of image row ``y`` (``r <= y < H − r``) in ``costrow`` (W, D), updating ``colsum`` from row ``y − 1``."""
+def _row_costs(costs, colsum, left, right, y, r, n_cols, n_padded, off):  # pragma: no cover - numba
+    """Eq 2 costs of image row ``y`` (``r <= y < H − r``): ``costs[x, k]`` (row stride D + 1, flat) for
+    ``r <= x < W − r``, updating the column sums ``colsum`` (W·D, flat) from row ``y − 1``."""
+    n_disp = np.uint64(colsum.shape[0]) // n_cols
+    stride = n_disp + np.uint64(1)
     if y == r:
         colsum[:] = 0
-        for yy in range(2 * r + 1):
-            _accumulate_columns(colsum, left[yy], right_pad[yy], left[yy], right_pad[yy], off, False)
+        for yy in range(np.uint64(2 * r + 1)):
+            _accumulate_columns(colsum, left, right, yy, yy, n_cols, n_padded, off, False)
     else:
-        ya = y + r
-        ys = y - r - 1
-        _accumulate_columns(colsum, left[ya], right_pad[ya], left[ys], right_pad[ys], off, True)
-    _window_costs(costrow, colsum, r)
+        _accumulate_columns(colsum, left, right, np.uint64(y + r), np.uint64(y - r - 1), n_cols, n_padded, off, True)
+    # box sums along the row: costs[x] = Σ_{x' = x−r}^{x+r} colsum[x'], running in ``window``
+    window = colsum[:n_disp].copy()
+    for xx in range(np.uint64(1), np.uint64(2 * r + 1)):
+        for k in range(n_disp):
+            window[k] += colsum[xx * n_disp + k]
+    first = np.uint64(r) * stride
+    for k in range(n_disp):
+        costs[first + k] = window[k]
+    for x in range(np.uint64(r + 1), n_cols - np.uint64(r)):
+        cur = x * stride
+        add = (x + np.uint64(r)) * n_disp
+        sub = (x - np.uint64(r + 1)) * n_disp
+        for k in range(n_disp):
+            window[k] += colsum[add + k] - colsum[sub + k]
+            costs[cur + k] = window[k]
 
 
 @njit(cache=True)
 def _parabola(c_minus, c0, c_plus):  # pragma: no cover - numba
-    """Vertex offset of the parabola through costs at ``d − 1, d, d + 1`` (``c0`` the smallest), in [−0.5, 0.5]."""
-    denom = c_minus - 2.0 * c0 + c_plus
-    if denom <= 0.0:
+    """Vertex offset of the parabola through the integer costs at ``d − 1, d, d + 1`` (``c0`` the smallest),
+    in [−0.5, 0.5]."""
+    denom = np.int64(c_minus) + np.int64(c_plus) - 2 * np.int64(c0)
+    if denom <= 0:
         return 0.0
-    return (c_minus - c_plus) / (2.0 * denom)
+    return (np.int64(c_minus) - np.int64(c_plus)) / (2.0 * denom)
+
+
+@njit(cache=True)
+def _unique(cost, second, uniqueness, top):  # pragma: no cover - numba
+    """StereoBM's uniqueness test: the best cost outside ``d* ± 1`` (``>= top``: none) exceeds the best by more
+    than ``uniqueness`` %."""
+    return second >= top or np.int64(second) * 100 > np.int64(cost) * (100 + uniqueness)
 
 
 # A winner-take-all key packs a cost and its disparity index j into one int32, cost · scale + j with
 # scale = 2^shift > j, so that one min() finds the best cost and, among equal costs, the smallest
-# disparity. ``scale`` is passed in at run time: a multiplication by it vectorizes in 32 bits,
-# where a shift by a run-time amount would be done in 64.
+# disparity. ``scale`` is passed in at run time: a multiplication by it vectorizes in 32 bits, where
+# a shift by a run-time amount would be done in 64.
+#
+# The right image's winners are running minima along the diagonals SAD_RL(u, d) = SAD_LR(u + d, d):
+# column x offers lane k to right pixel u = x + k - d_max, whose candidates thus arrive in increasing
+# disparity as x increases. For the uniqueness test each right pixel also keeps, streaming,
+#   second[u]: the smallest cost outside j* ± 1 of its current best j*,
+#   prefix[u]: the smallest cost up to j − 2 of the candidate j it is offered next,
+# so that when a new best arrives at j, second becomes prefix, and otherwise the candidate enters
+# second if it lies beyond j* + 1. The cost of the previous candidate j − 1 is lane k + 1 of column
+# x − 1 (the cost rows have one more lane, always "infinite", for k = D − 1).
 
 
 @njit(cache=True, boundscheck=False)
-def _scan_full(  # pragma: no cover - numba
-    costrow, lo, hi, off, scale, jvec, min_disp, uniqueness, subpixel, key_left, key_right, d_left, unique_left
-):
-    """Hot loop over the columns ``lo ... hi`` where every lane is defined.
-
-    For each column x: the left winner (``key_left[x]``), its sub-pixel disparity (``d_left[x]``) and
-    uniqueness (``unique_left[x]``), and the running minima for the right image,
-    ``key_right[x + off + k] = min(key_right[...], key of lane k at x)``.
-    """
-    n_disp = costrow.shape[1]
-    top = costrow.dtype.type(np.iinfo(costrow.dtype).max)
-    for x in range(lo, hi + 1):
-        c = costrow[x]
-        b = x + off
-        kr = key_right[b : b + n_disp]
+def _scan(costs, key_left, key_right, x0, x1, off, n_disp, scale, jvec):  # pragma: no cover - numba
+    """Columns ``x0 ... x1 − 1``: offer each column's costs to the right pixels' running minima
+    (``key_right[x + off + k]``) and keep its best key (over all lanes) in ``key_left[x]``."""
+    stride = n_disp + np.uint64(1)
+    for x in range(x0, x1):
+        cb = x * stride
+        rb = x + off
         best = np.int32(2**31 - 1)
         for k in range(n_disp):
-            key = np.int32(np.int32(c[k]) * scale + jvec[k])
+            key = np.int32(np.int32(costs[cb + k]) * scale + jvec[k])
             best = min(best, key)
-            kr[k] = min(kr[k], key)
+            key_right[rb + k] = min(key_right[rb + k], key)
         key_left[x] = best
-        j = best & (scale - 1)
-        kb = n_disp - 1 - j
-        cost = best // scale
-        offset = 0.0
-        if subpixel and 0 < j < n_disp - 1:
-            offset = _parabola(float(c[kb + 1]), float(cost), float(c[kb - 1]))
-        d_left[x] = min_disp + j + offset
-        if uniqueness > 0:
-            # the smallest cost outside kb ± 1: raise the three lanes, take the minimum, restore them
-            k_lo = max(kb - 1, 0)
-            k_hi = min(kb + 1, n_disp - 1)
-            c_lo = c[k_lo]
-            c_hi = c[k_hi]
-            c[k_lo] = top
-            c[kb] = top
-            c[k_hi] = top
-            second = top
-            for k in range(n_disp):
-                second = min(second, c[k])
-            c[k_lo] = c_lo
-            c[kb] = cost
-            c[k_hi] = c_hi
-            unique_left[x] = _unique(cost, second, uniqueness)
 
 
 @njit(cache=True, boundscheck=False)
-def _scan_partial(costrow, x, k0, k1, off, scale, jvec, key_left, key_right):  # pragma: no cover - numba
-    """Column ``x`` whose right windows fit only for lanes ``k0 ... k1 − 1``: its left winner over those lanes
-    (for the right image's consistency check) and the right running minima (lanes outside land on right
-    pixels that are never read)."""
-    n_disp = costrow.shape[1]
-    c = costrow[x]
-    b = x + off
-    kr = key_right[b : b + n_disp]
-    for k in range(n_disp):
-        kr[k] = min(kr[k], np.int32(np.int32(c[k]) * scale + jvec[k]))
+def _scan_tracking_second(costs, key_left, key_right, second, prefix, x0, x1, off, n_disp, scale, jvec):  # pragma: no cover
+    """:func:`_scan`, also keeping the right pixels' ``second`` and ``prefix`` costs (see above); the previous
+    candidate of lane k is lane k + 1 of the previous column."""
+    stride = n_disp + np.uint64(1)
+    for x in range(x0, x1):
+        cb = x * stride
+        pb = cb - n_disp
+        rb = x + off
+        best = np.int32(2**31 - 1)
+        for k in range(n_disp):
+            cost = np.int32(costs[cb + k])
+            key = np.int32(cost * scale + jvec[k])
+            old = key_right[rb + k]
+            p = prefix[rb + k]
+            beyond = jvec[k] > np.int32((old & (scale - 1)) + 1)
+            kept = min(second[rb + k], cost) if beyond else second[rb + k]
+            second[rb + k] = p if key < old else kept
+            prefix[rb + k] = min(p, np.int32(costs[pb + k]))
+            key_right[rb + k] = min(old, key)
+            best = min(best, key)
+        key_left[x] = best
+
+
+@njit(cache=True, boundscheck=False)
+def _best_in(costs, cb, k0, k1, scale, jvec):  # pragma: no cover - numba
+    """Best key among lanes ``k0 ... k1 − 1`` of the column costs at ``cb``."""
     best = np.int32(2**31 - 1)
     for k in range(k0, k1):
-        best = min(best, np.int32(np.int32(c[k]) * scale + jvec[k]))
-    key_left[x] = best
+        best = min(best, np.int32(np.int32(costs[cb + k]) * scale + jvec[k]))
+    return best
 
 
 @njit(cache=True, boundscheck=False)
-def _unique(cost, second, uniqueness):  # pragma: no cover - numba
-    """StereoBM's uniqueness test: the best cost outside ``d* ± 1`` exceeds the best by more than ``uniqueness`` %."""
-    return np.int64(second) * 100 > np.int64(cost) * (100 + uniqueness)
+def _second_left(costs, cb, kb, n_disp, top):  # pragma: no cover - numba
+    """Smallest column cost outside lanes ``kb ± 1``: raise those three, take the minimum, restore them."""
+    k_lo = cb + max(kb, np.uint64(1)) - np.uint64(1)
+    k_hi = cb + min(kb + np.uint64(1), n_disp - np.uint64(1))
+    c_lo, c_mid, c_hi = costs[k_lo], costs[cb + kb], costs[k_hi]
+    costs[k_lo] = top
+    costs[cb + kb] = top
+    costs[k_hi] = top
+    second = top
+    for k in range(n_disp):
+        second = min(second, costs[cb + k])
+    costs[k_lo] = c_lo
+    costs[cb + kb] = c_mid
+    costs[k_hi] = c_hi
+    return second
 
 
 @njit(cache=True, boundscheck=False)
 def _sad_kernel(  # pragma: no cover - numba
     left, right_pad, tex_left, tex_right, r, min_disp, off, shift, uniqueness, subpixel, tol,
-    colsum, costrow, out_left, out_right, out_valid,
+    colsum, costs, out_left, out_right, out_valid,
 ):
     """Both disparity images from one pass of Eq 2 costs; see the lane layout above.
 
     left (H, W) and right_pad (H, W + pads) int16 prefiltered images; tex_* (H, W) bool texture
-    masks; colsum and costrow (W, D) scratch of the cost dtype; outputs (H, W) float32 / bool, set
-    only where valid (the caller fills them with NaN / False).
+    masks; colsum (W·D,) and costs (W·(D + 1),) scratch of the cost dtype; outputs (H, W) float32 /
+    bool, set only where valid (the caller fills them with NaN / False).
     """
+    u64 = np.uint64
     n_rows, n_cols = left.shape
-    n_disp = colsum.shape[1]
+    n_disp = colsum.shape[0] // n_cols
+    nd = u64(n_disp)
+    stride = nd + u64(1)
+    wu = u64(n_cols)
+    wp = u64(right_pad.shape[1])
+    lf = left.reshape(left.size)
+    rf = right_pad.reshape(right_pad.size)
     big = np.int32(2**31 - 1)
+    top = costs.dtype.type(np.iinfo(costs.dtype).max)
     scale = np.int32(2**shift)
     mask = scale - 1
     jvec = np.arange(n_disp - 1, -1, -1).astype(np.int32)
     max_disp = min_disp + n_disp - 1
     pad_l = off + max_disp
-    key_left = np.empty(n_cols, np.int32)
+    track = uniqueness > 0
+    costs[:] = top  # columns x < r and lane D are never written
     key_right = np.empty(right_pad.shape[1], np.int32)  # right pixel u at u + pad_l
+    second_right = np.empty(right_pad.shape[1], np.int32)
+    prefix_right = np.empty(right_pad.shape[1], np.int32)
+    key_left = np.empty(n_cols, np.int32)
     d_left = np.empty(n_cols, np.float64)  # the row's disparities before the tests
     d_right = np.empty(n_cols, np.float64)
-    unique_left = np.ones(n_cols, np.bool_)
-    flat = costrow.reshape(n_cols * n_disp)
     # columns where the window fits for every disparity
     lo_left, hi_left = max(r, r + max_disp), min(n_cols - 1 - r, n_cols - 1 - r + min_disp)
     lo_right, hi_right = max(r, r - min_disp), min(n_cols - 1 - r, n_cols - 1 - r - max_disp)
     for y in range(r, n_rows - r):
-        _row_costs(costrow, colsum, left, right_pad, y, r, off)
-        key_left[:] = big
+        _row_costs(costs, colsum, lf, rf, y, r, wu, wp, u64(off))
         key_right[:] = big
+        second_right[:] = big
+        prefix_right[:] = big
         d_left[:] = np.nan
         d_right[:] = np.nan
-        if lo_left <= hi_left:
-            _scan_full(
-                costrow, lo_left, hi_left, off, scale, jvec, min_disp, uniqueness, subpixel,
-                key_left, key_right, d_left, unique_left,
+        if track:
+            _scan_tracking_second(
+                costs, key_left, key_right, second_right, prefix_right, u64(r), u64(n_cols - r), u64(off), nd, scale, jvec
             )
+        else:
+            _scan(costs, key_left, key_right, u64(r), u64(n_cols - r), u64(off), nd, scale, jvec)
+        # left disparities before the tests; the partial columns serve only the right image's check
         for x in range(r, n_cols - r):
-            if lo_left <= x <= hi_left:
-                continue
-            k0 = max(0, r - (x - max_disp))
-            k1 = min(n_disp, n_cols - r - (x - max_disp))
-            _scan_partial(costrow, x, k0, k1, off, scale, jvec, key_left, key_right)
-            if key_left[x] == big:
-                continue
+            cb = u64(x) * stride
+            k0, k1 = 0, n_disp
+            if x < lo_left or x > hi_left:  # only lanes whose right window fits: r <= x + k - d_max < W - r
+                k0 = max(0, r - (x - max_disp))
+                k1 = min(n_disp, n_cols - r - (x - max_disp))
+                if k0 >= k1:
+                    continue
+                key_left[x] = _best_in(costs, cb, u64(k0), u64(k1), scale, jvec)
             j = key_left[x] & mask
             kb = n_disp - 1 - j
             offset = 0.0
             if subpixel and k0 < kb < k1 - 1:
-                offset = _parabola(float(costrow[x, kb + 1]), float(key_left[x] >> shift), float(costrow[x, kb - 1]))
+                offset = _parabola(costs[cb + u64(kb + 1)], key_left[x] >> shift, costs[cb + u64(kb - 1)])
             d_left[x] = min_disp + j + offset
-        # right disparities: SAD_RL(u, d) = SAD_LR(u + d, d)
+        # right disparities before the tests: SAD_RL(u, d) = SAD_LR(u + d, d)
         for u in range(r, n_cols - r):
             key = key_right[u + pad_l]
             if key == big:
@@ -482,33 +508,28 @@ def _sad_kernel(  # pragma: no cover - numba
             offset = 0.0
             if subpixel and 0 < j < n_disp - 1 and r < x < n_cols - 1 - r:
                 kb = n_disp - 1 - j
-                offset = _parabola(float(costrow[x - 1, kb + 1]), float(key >> shift), float(costrow[x + 1, kb - 1]))
+                offset = _parabola(costs[u64(x - 1) * stride + u64(kb + 1)], key >> shift, costs[u64(x + 1) * stride + u64(kb - 1)])
             d_right[u] = min_disp + j + offset
-        # tests: texture, left-right consistency, uniqueness
+        # tests: texture, left-right consistency, uniqueness (d_left, d_right > 0.5 - r: int() floors)
         for x in range(lo_left, hi_left + 1):
             d = d_left[x]
-            u = int(np.floor(x - d + 0.5))
-            if unique_left[x] and tex_left[y, x] and 0 <= u < n_cols and abs(d - d_right[u]) <= tol:
-                out_left[y, x] = d
-                out_valid[y, x] = True
+            u = int(x - d + 0.5)
+            if not (tex_left[y, x] and u < n_cols and abs(d - d_right[u]) <= tol):
+                continue
+            if track:
+                cb = u64(x) * stride
+                kb = u64(n_disp - 1 - (key_left[x] & mask))
+                if not _unique(key_left[x] >> shift, _second_left(costs, cb, kb, nd, top), uniqueness, top):
+                    continue
+            out_left[y, x] = d
+            out_valid[y, x] = True
         for u in range(lo_right, hi_right + 1):
             d = d_right[u]
-            x = int(np.floor(u + d + 0.5))
-            if not (tex_right[y, u] and 0 <= x < n_cols and abs(d - d_left[x]) <= tol):
+            x = int(u + d + 0.5)
+            if not (tex_right[y, u] and x < n_cols and abs(d - d_left[x]) <= tol):
                 continue
-            if uniqueness > 0:
-                # the smallest cost outside j ± 1 along the diagonal SAD_LR(u + d, d)
-                key = key_right[u + pad_l]
-                j = key & mask
-                start = (u + min_disp) * n_disp + n_disp - 1  # (x = u + d_min, lane D - 1)
-                diag = flat[start : start + n_disp * (n_disp - 1) : n_disp - 1]
-                second = big
-                for jj in range(0, j - 1):
-                    second = min(second, np.int32(diag[jj]))
-                for jj in range(j + 2, n_disp):
-                    second = min(second, np.int32(diag[jj]))
-                if not _unique(key >> shift, second, uniqueness):
-                    continue
+            if track and not _unique(key_right[u + pad_l] >> shift, second_right[u + pad_l], uniqueness, top):
+                continue
             out_right[y, u] = d
 
 
@@ -529,11 +550,12 @@ def _numba_disparity(left8, right8, tex_left, tex_right, config: SADConfig) -> D
     r = config.block_size // 2
     if n_rows > 2 * r and n_cols > 2 * r:
         right_pad, off = _padded_right(_prefiltered(right8, config), config)
-        scratch = np.zeros((n_cols, config.num_disparities), _cost_dtype(config))
+        dtype = _cost_dtype(config)
         _sad_kernel(
             _prefiltered(left8, config), right_pad, tex_left, tex_right, r, config.min_disparity, off,
-            _key_shift(config.num_disparities), config.uniqueness_ratio,
-            config.subpixel, float(config.lr_tolerance), scratch, scratch.copy(), out_left, out_right, valid,
+            _key_shift(config.num_disparities), config.uniqueness_ratio, config.subpixel, float(config.lr_tolerance),
+            np.zeros(n_cols * config.num_disparities, dtype), np.zeros(n_cols * (config.num_disparities + 1), dtype),
+            out_left, out_right, valid,
         )
     return _frozen(out_left, out_right, valid)
 
@@ -638,14 +660,16 @@ def sad_reference(
 
 
 @njit(cache=True, boundscheck=False)
-def _cost_volume_kernel(left, right_pad, r, off, colsum, costrow, volume):  # pragma: no cover - numba
-    n_rows = left.shape[0]
-    n_disp = colsum.shape[1]
+def _cost_volume_kernel(left, right_pad, r, off, colsum, costs, volume):  # pragma: no cover - numba
+    n_rows, n_cols = left.shape
+    n_disp = volume.shape[2]
+    lf = left.reshape(left.size)
+    rf = right_pad.reshape(right_pad.size)
     for y in range(r, n_rows - r):
-        _row_costs(costrow, colsum, left, right_pad, y, r, off)
-        for x in range(r, left.shape[1] - r):
+        _row_costs(costs, colsum, lf, rf, y, r, np.uint64(n_cols), np.uint64(right_pad.shape[1]), np.uint64(off))
+        for x in range(r, n_cols - r):
             for k in range(n_disp):
-                volume[y, x, n_disp - 1 - k] = costrow[x, k]
+                volume[y, x, n_disp - 1 - k] = costs[x * (n_disp + 1) + k]
 
 
 def sad_cost_volume(
@@ -667,8 +691,11 @@ def sad_cost_volume(
     costs = np.full((n_rows, n_cols, num_disparities), -1, np.int64)
     if n_rows > 2 * r and n_cols > 2 * r:
         right_pad, off = _padded_right(right8.astype(np.int16), config)
-        scratch = np.zeros((n_cols, num_disparities), _cost_dtype(config))
-        _cost_volume_kernel(left8.astype(np.int16), right_pad, r, off, scratch, scratch.copy(), costs)
+        dtype = _cost_dtype(config)
+        _cost_volume_kernel(
+            left8.astype(np.int16), right_pad, r, off, np.zeros(n_cols * num_disparities, dtype),
+            np.zeros(n_cols * (num_disparities + 1), dtype), costs,
+        )
     sad_lr = costs.astype(np.float64)
     u = np.arange(n_cols)[None, :, None]
     d = min_disparity + np.arange(num_disparities)[None, None, :]

@@ -1,0 +1,159 @@
+"""``stablemarks eval``: Monte Carlo evaluation of the methods side by side on simulated scenarios.
+
+Runs N trials per scenario (independent odometry, exposure and sensor noise, seeds from
+``SeedSequence.spawn``), every method on the same trials, in parallel through joblib; writes
+``trials.jsonl``, ``summary.json``, ``summary.csv``, ``report.md`` and its figures into DIR and prints the
+summary table and the goals. Definitions of the metrics: :mod:`stablemarks.evaluation`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, expected
+from ._common import make_console, parse_triplet
+
+NAME = "eval"
+HELP = "Monte Carlo evaluation of the methods on simulated scenarios (NEES, NIS, ATE, selection, stability)"
+DESCRIPTION = (
+    "Run N trials of each SCENARIO (a built-in name such as 'lab', or a scenario YAML file), each with its own "
+    "odometry, exposure and sensor noise, and every method on the same trials; write DIR/trials.jsonl (one line "
+    "per trial and method), DIR/summary.json, DIR/summary.csv and DIR/report.md with its figures, and print "
+    "the summary. The metrics are defined in the report and the README."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from ..online import METHODS
+    from ..sim.scenario import builtin_scenarios
+
+    p.add_argument("scenarios", nargs="+", metavar="SCENARIO",
+                   help=f"built-in scenario ({', '.join(builtin_scenarios())}) or a scenario YAML file")
+    p.add_argument("--trials", type=int, default=10, metavar="N", help="trials per scenario (default 10)")
+    p.add_argument("--jobs", type=int, default=1, metavar="J", help="parallel jobs, -1 for all cores (default 1)")
+    p.add_argument("--backend", default="loky", choices=["loky", "dask", "ray"],
+                   help="joblib backend (default loky; dask and ray need the optional extras)")
+    p.add_argument("--address", metavar="ADDR",
+                   help="dask scheduler or ray cluster address (default: a local cluster of --jobs workers)")
+    p.add_argument("--methods", default=",".join(METHODS), metavar="M1,M2",
+                   help=f"comma-separated methods (default: all of {', '.join(METHODS)})")
+    p.add_argument("--frames", type=int, default=None, metavar="N", help="only the first N frames of each run")
+    p.add_argument("--seed", type=int, default=None, metavar="S",
+                   help="base seed of the trials (default: each scenario's seed)")
+    p.add_argument("--pose-sigma", default="0.05,0.05,1deg", metavar="SX,SY,STHETA",
+                   help="standard deviations of the start pose belief (default 0.05,0.05,1deg)")
+    p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README)")
+    p.add_argument("--out", default="results/eval", metavar="DIR", help="output folder (default results/eval)")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures (report.md without them)")
+
+
+def run(args) -> int:
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+    from rich.table import Table
+
+    from ..config import load_config
+    from ..evaluation import (
+        REPORT_COLUMNS,
+        check_backend,
+        check_goals,
+        evaluate,
+        format_value,
+        make_trials,
+        report_markdown,
+        summarize,
+        summary_csv,
+        summary_json,
+        trials_jsonl,
+    )
+
+    console = make_console()
+    # Validate everything before running or writing anything.
+    config = load_config(args.config)
+    sigma = parse_triplet(args.pose_sigma, "σx, σy, σθ", "--pose-sigma")
+    if np.any(sigma <= 0):
+        raise InputError(expected("positive standard deviations", args.pose_sigma, where="--pose-sigma"))
+    if args.seed is not None and args.seed < 0:
+        raise InputError(expected("a non-negative seed", args.seed, where="--seed"))
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(expected("a directory", str(out), where="--out"))
+    check_backend(args.backend)
+    trials = make_trials(args.scenarios, args.trials, methods, seed=args.seed, frames=args.frames,
+                         cov0=np.diag(sigma**2), config=config)
+    if isinstance(args.jobs, int) and (args.jobs == 0 or args.jobs < -1):
+        raise InputError(expected("a positive number of jobs (or -1 for all cores)", args.jobs, where="--jobs"))
+
+    start = time.perf_counter()
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  TimeRemainingColumn(), console=console) as bar:
+        task = bar.add_task(f"{len(trials)} runs ({args.trials} trials × {len(set(methods))} methods × "
+                            f"{len(args.scenarios)} scenarios)", total=len(trials))
+
+        def progress(done, total, res):
+            bar.update(task, completed=done,
+                       description=f"{res['scenario']} trial {res['trial']} {res['method']}: done")
+
+        results = evaluate(trials, jobs=args.jobs, backend=args.backend, address=args.address, progress=progress)
+    wall = time.perf_counter() - start
+    summary = summarize(results)
+    goals = check_goals(summary)
+
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".eval-", dir=out))
+    try:
+        (tmp / "trials.jsonl").write_text(trials_jsonl(results))
+        (tmp / "summary.json").write_text(summary_json(summary))
+        (tmp / "summary.csv").write_text(summary_csv(summary))
+        figures = {}
+        if not args.no_figures:
+            from ..viz.report import report_figures
+
+            figures = {k: p.name for k, p in report_figures(tmp, summary, results).items()}
+        meta = {"scenarios": ", ".join(summary), "trials": args.trials, "methods": ", ".join(dict.fromkeys(methods)),
+                "frames": args.frames or "all", "seed": "scenario's" if args.seed is None else args.seed,
+                "start pose σ": args.pose_sigma, "jobs": args.jobs, "backend": args.backend,
+                "wall time": f"{wall:.0f} s"}
+        (tmp / "report.md").write_text(report_markdown(summary, goals, figures, meta))
+        for f in tmp.iterdir():
+            os.replace(f, out / f.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+    for scen, by_method in summary.items():
+        first = next(iter(by_method.values()))
+        lo, hi = first["nees_pose_bounds"]
+        t = Table(title=f"{scen}: {first['trials']} trials × {first['frames']} frames "
+                        f"(pose NEES bounds [{lo:.2f}, {hi:.2f}])")
+        t.add_column("method")
+        for _, heading, _ in REPORT_COLUMNS:
+            t.add_column(heading, justify="right")
+        for method, s in by_method.items():
+            t.add_row(method, *(format_value(s[k], f) for k, _, f in REPORT_COLUMNS))
+        console.print(t)
+    if goals:
+        t = Table(title="goals of the full method")
+        for col in ("scenario", "goal", "value", "target", "met"):
+            t.add_column(col, justify="right" if col == "value" else "left")
+        for g in goals:
+            met = "n/a" if g.met is None else ("[green]yes[/]" if g.met else "[red]no[/]")
+            t.add_row(g.scenario, g.name, g.value, g.target, met)
+        console.print(t)
+    console.print(f"{len(results)} runs in {wall:.1f} s wall time ({args.jobs} job(s), {args.backend}); wrote "
+                  f"{out}/trials.jsonl, summary.json, summary.csv, report.md"
+                  + (", nees_pose.png, ate.png, reobservation.png" if figures else ""))
+    return 0

@@ -135,3 +135,15 @@ def test_selection_rules():
 def test_landmark_config_validation():
     with pytest.raises(ValueError, match="boundary_rule"):
         LandmarkConfig(boundary_rule="loose")
+
+
+def test_free_edge_behind_the_camera_does_not_break_the_frame(lab_scenario, lab_sim, lab_first_frame):
+    """A wall in view whose free edge is behind the camera (walls from a whole-room map)."""
+    from stablemarks.maps import Map, ReferencePlane
+
+    side = ReferencePlane("side", (-2.0, -1.0), (-2.0, 5.0), free_edges=("p1",))
+    world = Map(lab_scenario.map.planes + (side,))
+    cam = lab_scenario.camera.with_pan(lab_sim.pans[0])
+    result = process_frame(lab_first_frame.left, lab_first_frame.right, cam, world, lab_sim.poses[0].as_array(),
+                           COV_PRIOR)
+    assert len(result.selected) >= 9

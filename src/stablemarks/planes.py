@@ -114,7 +114,8 @@ class PlanePrediction:
         u0, u1 = self.window
         sub = disparity[:, u0 : u1 + 1]
         with np.errstate(invalid="ignore"):
-            ok = np.abs(sub - self.d[None, :]) <= self.gate * self.sigma_d[None, :]
+            # a zero disparity is a point at infinity: never on a wall
+            ok = (np.abs(sub - self.d[None, :]) <= self.gate * self.sigma_d[None, :]) & (sub > 0)
         rows = np.arange(H)[:, None]
         ok &= (rows >= self.v_top[None, :] - row_margin) & (rows <= self.v_bottom[None, :] + row_margin)
         mask[:, u0 : u1 + 1] = ok

@@ -146,7 +146,8 @@ def zoom_figure7(path: str | Path, result, planes: list[str]) -> Path:
         ax.axvline(0, color="#d00000", lw=1)
         ax.set_yticks([])
         ax.set_ylim(-0.6, 0.6)
-        ax.set_xlabel(f"{cands[0].plane_label}: distance from the free edge [m] (bars: ±3σ)")
+        ax.set_xlabel(f"{cands[0].plane_label}: distance from the free edge [m] "
+                      "(bars: ±3σ; green selected, orange rejected)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -444,6 +444,11 @@ def _sad_kernel(  # pragma: no cover - numba
     """
     u64 = np.uint64
     n_rows, n_cols = left.shape
+    tex_left = tex_left.reshape(tex_left.size)
+    tex_right = tex_right.reshape(tex_right.size)
+    out_left = out_left.reshape(out_left.size)
+    out_right = out_right.reshape(out_right.size)
+    out_valid = out_valid.reshape(out_valid.size)
     n_disp = colsum.shape[0] // n_cols
     nd = u64(n_disp)
     stride = nd + u64(1)
@@ -485,18 +490,20 @@ def _sad_kernel(  # pragma: no cover - numba
         # left disparities before the tests; the partial columns serve only the right image's check
         for x in range(r, n_cols - r):
             cb = u64(x) * stride
+            key = key_left[x]
             k0, k1 = 0, n_disp
             if x < lo_left or x > hi_left:  # only lanes whose right window fits: r <= x + k - d_max < W - r
                 k0 = max(0, r - (x - max_disp))
                 k1 = min(n_disp, n_cols - r - (x - max_disp))
                 if k0 >= k1:
                     continue
-                key_left[x] = _best_in(costs, cb, u64(k0), u64(k1), scale, jvec)
-            j = key_left[x] & mask
-            kb = n_disp - 1 - j
+                key = _best_in(costs, cb, u64(k0), u64(k1), scale, jvec)
+                key_left[x] = key
+            j = key & mask
             offset = 0.0
-            if subpixel and k0 < kb < k1 - 1:
-                offset = _parabola(costs[cb + u64(kb + 1)], key_left[x] >> shift, costs[cb + u64(kb - 1)])
+            kb = u64(n_disp - 1 - j)
+            if subpixel and k0 < n_disp - 1 - j < k1 - 1:
+                offset = _parabola(costs[cb + kb + u64(1)], key >> shift, costs[cb + kb - u64(1)])
             d_left[x] = min_disp + j + offset
         # right disparities before the tests: SAD_RL(u, d) = SAD_LR(u + d, d)
         for u in range(r, n_cols - r):
@@ -507,30 +514,33 @@ def _sad_kernel(  # pragma: no cover - numba
             x = u + min_disp + j  # the left column of the match
             offset = 0.0
             if subpixel and 0 < j < n_disp - 1 and r < x < n_cols - 1 - r:
-                kb = n_disp - 1 - j
-                offset = _parabola(costs[u64(x - 1) * stride + u64(kb + 1)], key >> shift, costs[u64(x + 1) * stride + u64(kb - 1)])
+                kb = u64(n_disp - 1 - j)
+                cb = u64(x) * stride
+                offset = _parabola(costs[cb - stride + kb + u64(1)], key >> shift, costs[cb + stride + kb - u64(1)])
             d_right[u] = min_disp + j + offset
-        # tests: texture, left-right consistency, uniqueness (d_left, d_right > 0.5 - r: int() floors)
-        for x in range(lo_left, hi_left + 1):
+        # tests: texture, left-right consistency, uniqueness; x - d_left + 0.5 and u + d_right + 0.5 are
+        # >= r > 0 on these columns, so int() rounds them
+        row = u64(y) * wu
+        for x in range(u64(lo_left), u64(hi_left + 1)):
             d = d_left[x]
-            u = int(x - d + 0.5)
-            if not (tex_left[y, x] and u < n_cols and abs(d - d_right[u]) <= tol):
+            u = u64(x - d + 0.5)
+            if not (tex_left[row + x] and u < wu and abs(d - d_right[u]) <= tol):
                 continue
             if track:
-                cb = u64(x) * stride
-                kb = u64(n_disp - 1 - (key_left[x] & mask))
-                if not _unique(key_left[x] >> shift, _second_left(costs, cb, kb, nd, top), uniqueness, top):
+                key = key_left[x]
+                kb = u64(n_disp - 1 - (key & mask))
+                if not _unique(key >> shift, _second_left(costs, x * stride, kb, nd, top), uniqueness, top):
                     continue
-            out_left[y, x] = d
-            out_valid[y, x] = True
-        for u in range(lo_right, hi_right + 1):
+            out_left[row + x] = d
+            out_valid[row + x] = True
+        for u in range(u64(lo_right), u64(hi_right + 1)):
             d = d_right[u]
-            x = int(u + d + 0.5)
-            if not (tex_right[y, u] and x < n_cols and abs(d - d_left[x]) <= tol):
+            x = u64(u + d + 0.5)
+            if not (tex_right[row + u] and x < wu and abs(d - d_left[x]) <= tol):
                 continue
-            if track and not _unique(key_right[u + pad_l] >> shift, second_right[u + pad_l], uniqueness, top):
+            if track and not _unique(key_right[u + u64(pad_l)] >> shift, second_right[u + u64(pad_l)], uniqueness, top):
                 continue
-            out_right[y, u] = d
+            out_right[row + u] = d
 
 
 def _cost_dtype(config: SADConfig):

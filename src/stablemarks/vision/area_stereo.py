@@ -130,13 +130,21 @@ class SADConfig:
         if self.backend == "opencv":
             if self.num_disparities % 16:
                 raise ConfigError(
-                    expected("a multiple of 16 with backend 'opencv'", self.num_disparities, where=f"{where}.num_disparities")
+                    expected(
+                        "a multiple of 16 with backend 'opencv'", self.num_disparities, where=f"{where}.num_disparities"
+                    )
                 )
             if self.block_size < 5:
-                raise ConfigError(expected("block_size >= 5 with backend 'opencv'", self.block_size, where=f"{where}.block_size"))
+                raise ConfigError(
+                    expected("block_size >= 5 with backend 'opencv'", self.block_size, where=f"{where}.block_size")
+                )
             if self.prefilter != "xsobel":
                 raise ConfigError(
-                    expected("'xsobel' with backend 'opencv' (StereoBM always prefilters)", self.prefilter, where=f"{where}.prefilter")
+                    expected(
+                        "'xsobel' with backend 'opencv' (StereoBM always prefilters)",
+                        self.prefilter,
+                        where=f"{where}.prefilter",
+                    )
                 )
 
     @property
@@ -381,7 +389,9 @@ def _scan(costs, key_left, key_right, x0, x1, off, n_disp, scale, jvec):  # prag
 
 
 @njit(cache=True, boundscheck=False)
-def _scan_tracking_second(costs, key_left, key_right, second, prefix, x0, x1, off, n_disp, scale, jvec):  # pragma: no cover
+def _scan_tracking_second(
+    costs, key_left, key_right, second, prefix, x0, x1, off, n_disp, scale, jvec
+):  # pragma: no cover
     """:func:`_scan`, also keeping the right pixels' ``second`` and ``prefix`` costs (see above); the previous
     candidate of lane k is lane k + 1 of the previous column."""
     stride = n_disp + np.uint64(1)
@@ -433,8 +443,22 @@ def _second_left(costs, cb, kb, n_disp, top):  # pragma: no cover - numba
 
 @njit(cache=True, boundscheck=False)
 def _sad_kernel(  # pragma: no cover - numba
-    left, right_pad, tex_left, tex_right, r, min_disp, off, shift, uniqueness, subpixel, tol,
-    colsum, costs, out_left, out_right, out_valid,
+    left,
+    right_pad,
+    tex_left,
+    tex_right,
+    r,
+    min_disp,
+    off,
+    shift,
+    uniqueness,
+    subpixel,
+    tol,
+    colsum,
+    costs,
+    out_left,
+    out_right,
+    out_valid,
 ):
     """Both disparity images from one pass of Eq 2 costs; see the lane layout above.
 
@@ -483,7 +507,17 @@ def _sad_kernel(  # pragma: no cover - numba
         d_right[:] = np.nan
         if track:
             _scan_tracking_second(
-                costs, key_left, key_right, second_right, prefix_right, u64(r), u64(n_cols - r), u64(off), nd, scale, jvec
+                costs,
+                key_left,
+                key_right,
+                second_right,
+                prefix_right,
+                u64(r),
+                u64(n_cols - r),
+                u64(off),
+                nd,
+                scale,
+                jvec,
             )
         else:
             _scan(costs, key_left, key_right, u64(r), u64(n_cols - r), u64(off), nd, scale, jvec)
@@ -562,10 +596,22 @@ def _numba_disparity(left8, right8, tex_left, tex_right, config: SADConfig) -> D
         right_pad, off = _padded_right(_prefiltered(right8, config), config)
         dtype = _cost_dtype(config)
         _sad_kernel(
-            _prefiltered(left8, config), right_pad, tex_left, tex_right, r, config.min_disparity, off,
-            _key_shift(config.num_disparities), config.uniqueness_ratio, config.subpixel, float(config.lr_tolerance),
-            np.zeros(n_cols * config.num_disparities, dtype), np.zeros(n_cols * (config.num_disparities + 1), dtype),
-            out_left, out_right, valid,
+            _prefiltered(left8, config),
+            right_pad,
+            tex_left,
+            tex_right,
+            r,
+            config.min_disparity,
+            off,
+            _key_shift(config.num_disparities),
+            config.uniqueness_ratio,
+            config.subpixel,
+            float(config.lr_tolerance),
+            np.zeros(n_cols * config.num_disparities, dtype),
+            np.zeros(n_cols * (config.num_disparities + 1), dtype),
+            out_left,
+            out_right,
+            valid,
         )
     return _frozen(out_left, out_right, valid)
 
@@ -601,7 +647,11 @@ def _opencv_disparity(left8, right8, tex_left, tex_right, config: SADConfig) -> 
     inside_r = np.zeros((n_rows, n_cols), bool)
     inside_r[r : n_rows - r, max(r, r - config.min_disparity) : n_cols - r - max(0, config.max_disparity)] = True
     valid_r = inside_r & tex_right & _consistent(raw_right, raw_left, 1.0, config.lr_tolerance)
-    return _frozen(np.where(valid, raw_left, np.nan).astype(np.float32), np.where(valid_r, raw_right, np.nan).astype(np.float32), valid)
+    return _frozen(
+        np.where(valid, raw_left, np.nan).astype(np.float32),
+        np.where(valid_r, raw_right, np.nan).astype(np.float32),
+        valid,
+    )
 
 
 def _from_fixed_point(disp16: np.ndarray, config: SADConfig) -> np.ndarray:
@@ -691,7 +741,9 @@ def sad_cost_volume(
     (H, W) ``uint8`` or float in [0, 1]; returns ``(sad_lr, sad_rl)``, (H, W, num_disparities) float64,
     ``inf`` where a window leaves the image.
     """
-    config = SADConfig(block_size=block_size, num_disparities=num_disparities, min_disparity=min_disparity, prefilter="none")
+    config = SADConfig(
+        block_size=block_size, num_disparities=num_disparities, min_disparity=min_disparity, prefilter="none"
+    )
     left8 = _gray8(left, "left")
     right8 = _gray8(right, "right")
     if left8.shape != right8.shape:
@@ -703,8 +755,13 @@ def sad_cost_volume(
         right_pad, off = _padded_right(right8.astype(np.int16), config)
         dtype = _cost_dtype(config)
         _cost_volume_kernel(
-            left8.astype(np.int16), right_pad, r, off, np.zeros(n_cols * num_disparities, dtype),
-            np.zeros(n_cols * (num_disparities + 1), dtype), costs,
+            left8.astype(np.int16),
+            right_pad,
+            r,
+            off,
+            np.zeros(n_cols * num_disparities, dtype),
+            np.zeros(n_cols * (num_disparities + 1), dtype),
+            costs,
         )
     sad_lr = costs.astype(np.float64)
     u = np.arange(n_cols)[None, :, None]

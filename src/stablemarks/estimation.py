@@ -602,6 +602,24 @@ class JointEKF:
         return h, H
 
     # ------------------------------------------------------------- association
+    def _association_costs(self, measured, pan, candidates, extra_cost):
+        """Landmarks in view ``ids`` (c,), measurements ``z`` (k, 2), squared Mahalanobis distances ``d2``
+        (c, k) and ``cost`` = ``d2`` + ``extra_cost`` (its rows in the order of ``candidates``)."""
+        z = np.asarray(measured, dtype=float).reshape(-1, 2) if np.size(measured) else np.zeros((0, 2))
+        if not np.all(np.isfinite(z)):
+            raise InputError(expected("finite measured columns", measured, where="associate.measured"))
+        pred = self.predict_observation(candidates, pan)
+        ids, uv, S = pred.ids[pred.in_view], pred.uv[pred.in_view], pred.S[pred.in_view]
+        if len(ids) == 0 or len(z) == 0:
+            empty = np.zeros((len(ids), len(z)))
+            return ids, z, empty + np.inf, empty + np.inf
+        nu = z[None, :, :] - uv[:, None, :]  # (c, k, 2)
+        d2 = np.einsum("cki,cij,ckj->ck", nu, np.linalg.inv(S), nu)
+        cost = d2
+        if extra_cost is not None:
+            cost = d2 + _matrix(extra_cost, (len(pred.ids), len(z)), "associate.extra_cost")[pred.in_view]
+        return ids, z, d2, cost
+
     def associate(self, measured, pan: float = 0.0, candidates: Sequence[int] | None = None,
                   extra_cost=None) -> list[tuple[int, int]]:
         """Assign measured column pairs to landmarks one-to-one.
@@ -622,22 +640,10 @@ class JointEKF:
 
         Returns ``[(landmark id, measurement index), …]`` sorted by measurement index.
         """
-        z = np.asarray(measured, dtype=float).reshape(-1, 2) if np.size(measured) else np.zeros((0, 2))
-        if not np.all(np.isfinite(z)):
-            raise InputError(expected("finite measured columns", measured, where="associate.measured"))
-        pred = self.predict_observation(candidates, pan)
-        extra = None
-        if extra_cost is not None:
-            extra = _matrix(extra_cost, (len(pred.ids), len(z)), "associate.extra_cost")[pred.in_view]
-        ids, uv, S = pred.ids[pred.in_view], pred.uv[pred.in_view], pred.S[pred.in_view]
-        if len(ids) == 0 or len(z) == 0:
-            return []
-        nu = z[None, :, :] - uv[:, None, :]  # (c, k, 2)
-        d2 = np.einsum("cki,cij,ckj->ck", nu, np.linalg.inv(S), nu)
+        ids, z, d2, cost = self._association_costs(measured, pan, candidates, extra_cost)
         feasible = d2 <= self.config.gate
         if not feasible.any():
             return []
-        cost = d2 if extra is None else d2 + extra
         c = len(ids)
         big = (np.abs(cost[feasible]).max() + 1.0 + self.config.gate) * (c + 1)
         dummy = np.full((c, c), big)
@@ -681,19 +687,7 @@ class JointEKF:
         the joint NIS of the set stays inside the χ² gate of ``2n`` dof (sequential compatible nearest
         neighbour, a greedy form of joint compatibility).
         """
-        z = np.asarray(measured, dtype=float).reshape(-1, 2) if np.size(measured) else np.zeros((0, 2))
-        if not np.all(np.isfinite(z)):
-            raise InputError(expected("finite measured columns", measured, where="associate.measured"))
-        pred = self.predict_observation(candidates, pan)
-        extra = None
-        if extra_cost is not None:
-            extra = _matrix(extra_cost, (len(pred.ids), len(z)), "associate.extra_cost")[pred.in_view]
-        ids, uv, S = pred.ids[pred.in_view], pred.uv[pred.in_view], pred.S[pred.in_view]
-        if len(ids) == 0 or len(z) == 0:
-            return []
-        nu = z[None, :, :] - uv[:, None, :]
-        d2 = np.einsum("cki,cij,ckj->ck", nu, np.linalg.inv(S), nu)
-        cost = d2 if extra is None else d2 + extra
+        ids, z, d2, cost = self._association_costs(measured, pan, candidates, extra_cost)
         order = [(r, c) for r, c in zip(*np.nonzero(d2 <= self.config.gate), strict=True)]
         order.sort(key=lambda rc: cost[rc])
         chosen: list[tuple[int, int]] = []

@@ -147,3 +147,18 @@ def test_free_edge_behind_the_camera_does_not_break_the_frame(lab_scenario, lab_
     result = process_frame(lab_first_frame.left, lab_first_frame.right, cam, world, lab_sim.poses[0].as_array(),
                            COV_PRIOR)
     assert len(result.selected) >= 9
+
+
+def test_a_free_edge_out_of_sight_still_rejects_features_near_it():
+    from stablemarks.landmarks import mapped_boundaries
+    from stablemarks.maps import ReferencePlane
+
+    plane = ReferencePlane("w", (0.0, 4.0), (1.2, 4.0), free_edges=("p1", "p2"))
+    ref = Boundary("w", "p1", np.zeros(2), np.ones(2), np.array([0.0, 4.0]), np.eye(2), 0.035, False, 100,
+                   np.array([1.0, 0.0]))
+    far = mapped_boundaries(plane, [ref], ref)
+    assert len(far) == 1 and far[0].edge == "p2"
+    np.testing.assert_allclose(far[0].P, [1.2, 4.0])
+    out = select([_cand(1.15), _cand(0.6)], [ref] + far)
+    assert [c.selected for c in out] == [False, True]
+    assert out[0].reason == REASON_NEAR_BOUNDARY

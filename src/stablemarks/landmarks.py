@@ -425,4 +425,15 @@ def landmarks_on_plane(
         return PlaneLandmarks(fit, [], members, [])
     ref = min(boundaries, key=lambda b: b.sigma_along)
     cands = model_features(camera, fit, ref, pairs, idx)
-    return PlaneLandmarks(fit, boundaries, members, select(cands, boundaries, config))
+    # A free edge not found in this frame (out of the searchable part of the image) is still where the map
+    # puts it: the wall's length from the edge that was found. Features near it are near a boundary too.
+    mapped = mapped_boundaries(fit.plane, boundaries, ref)
+    return PlaneLandmarks(fit, boundaries, members, select(cands, boundaries + mapped, config))
+
+
+def mapped_boundaries(plane, boundaries: list[Boundary], ref: Boundary) -> list[Boundary]:
+    """The plane's free edges not found in this frame, placed the wall's length from ``ref`` (the map
+    fixes it) with ``ref``'s uncertainty, for the near-boundary rule."""
+    found = {b.edge for b in boundaries}
+    return [replace(ref, edge=e, P=ref.P + plane.length * ref.inward, inward=-ref.inward)
+            for e in plane.free_edges if e not in found]

@@ -162,3 +162,73 @@ def test_a_free_edge_out_of_sight_still_rejects_features_near_it():
     out = select([_cand(1.15), _cand(0.6)], [ref] + far)
     assert [c.selected for c in out] == [False, True]
     assert out[0].reason == REASON_NEAR_BOUNDARY
+
+
+def test_a_wall_end_against_another_wall_rejects_features_near_it():
+    """A door leaf opened against a wall: its hinge end is not free, but features there are near a boundary."""
+    from stablemarks.landmarks import mapped_boundaries
+    from stablemarks.maps import ReferencePlane
+
+    plane = ReferencePlane("w", (0.0, 4.0), (0.95, 4.0), free_edges=("p1",))
+    ref = Boundary("w", "p1", np.zeros(2), np.ones(2), np.array([0.0, 4.0]), np.eye(2), 0.035, False, 100,
+                   np.array([1.0, 0.0]))
+    far = mapped_boundaries(plane, [ref], ref)
+    assert [b.edge for b in far] == ["p2"]
+    out = select([_cand(0.93), _cand(1.01), _cand(0.5)], [ref] + far)
+    assert [c.selected for c in out] == [False, False, True]
+
+
+def _poster_scene(gap):
+    """A poster board across the view whose far end is ``gap`` metres in front of a perpendicular side wall."""
+    doc = copy.deepcopy(BASE)
+    doc["walls"][0].update(p1=[0.0, 3.5], p2=[-1.5 + gap, 3.5])
+    doc["walls"].append({"id": "side", "p1": [-1.5, 0.0], "p2": [-1.5, 7.0], "z": [0.0, 2.8], "reference": False,
+                         "texture": {"kind": "noise", "base": 100, "contrast": 10, "scale": 0.05}})
+    doc["features"] = [
+        {"id": "panel-a", "wall": "panel", "s": 0.3, "z": [0.5, 1.4], "kind": "edge", "contrast": 60, "fade": 0.3},
+        {"id": "panel-b", "wall": "panel", "s": 0.6, "z": [0.3, 1.2], "kind": "edge", "contrast": -60, "fade": 0.3},
+    ]
+    doc["robot"] = {"start": {"x": -0.6, "y": 0.0, "theta_deg": 90.0}}
+    return doc
+
+
+@pytest.mark.parametrize("gap", [0.04, 0.8])
+def test_edge_depth_step_from_the_map(gap):
+    from stablemarks.landmarks import edge_depth_step
+
+    sc = parse_scenario(_poster_scene(gap), "test")
+    X = np.array([-0.6, 0.0, np.pi / 2])
+    plane = sc.map["panel"]
+    fb = sc.camera.f * sc.camera.baseline
+    # open side: beyond p1 the back wall at y = 7 (0.6 + 5 px left of the edge hardly changes its depth)
+    step_p1 = edge_depth_step(sc.camera, X, sc.map, plane, "p1", 5.0)
+    assert step_p1 == pytest.approx(fb / 7.0 - fb / 3.5, abs=0.05)
+    step_p2 = edge_depth_step(sc.camera, X, sc.map, plane, "p2", 5.0)
+    if gap < 0.1:  # the side wall right behind the far end, at nearly the board's depth
+        assert abs(step_p2) < 0.5
+    else:
+        assert step_p2 < -3.0
+
+
+def test_an_edge_without_a_depth_step_is_not_searched():
+    """Beyond the board's far end the side wall continues at the board's depth: the disparity region runs on
+    over it, so that end cannot be found from disparity. It is not searched; the near edge is, and the
+    features are modelled from it."""
+    doc = _poster_scene(0.04)
+    sc = parse_scenario(doc, "test")
+    X = np.array([-0.6, 0.0, np.pi / 2])
+    frame = render_stereo(sc, X, 0.0, np.random.default_rng(3))
+    res = process_frame(frame.left, frame.right, sc.camera, sc.map, X, COV_PRIOR)
+    (model,) = [m for m in res.planes if m.fit.plane.id == "panel"]
+    assert [b.edge for b in model.boundaries] == ["p1"]
+    assert abs(model.boundaries[0].P[0] - 0.0) < 3 * model.boundaries[0].sigma_along
+    assert_true_features_selected(res, frame)
+    # Without the map's help the far end is "found" where the region ends, on the side wall.
+    from stablemarks.landmarks import landmarks_on_plane
+    from stablemarks.pipeline import valid_columns
+
+    blind = landmarks_on_plane(sc.camera, model.fit, res.front.kept_pairs, res.front.left_segments,
+                               res.front.disparity.right, window_px=15.0,
+                               valid_columns=valid_columns(res.front.disparity))
+    (far,) = [b for b in blind.boundaries if b.edge == "p2"]
+    assert abs(far.P[0] - (-1.46)) > 3 * far.sigma_along

@@ -121,3 +121,18 @@ def test_visibility_occlusion_hides_wall_behind():
     m = Map((ReferencePlane("front", (-3.0, 2.0), (3.0, 2.0)), ReferencePlane("behind", (-0.5, 5.0), (0.5, 5.0))))
     ids = [v.plane.id for v in visible_parts(m, cam, np.array([0.0, 0.0, np.pi / 2]))]
     assert ids == ["front"]
+
+
+def test_ray_distances_hit_the_nearest_wall():
+    from stablemarks.maps import ray_distances
+
+    walls = np.array([[[-1.0, 2.0], [1.0, 2.0]], [[-1.0, 5.0], [1.0, 5.0]], [[3.0, -1.0], [3.0, 1.0]]])
+    origins = np.zeros((4, 2))
+    dirs = np.array([[0.0, 1.0], [1.0, 0.0], [-1.0, 0.0], [0.28, 0.96]])
+    d = ray_distances(origins, dirs, walls)
+    np.testing.assert_allclose(d[:2], [2.0, 3.0])
+    assert np.isinf(d[2])
+    np.testing.assert_allclose(d[3], 2.0 / 0.96)
+    # the nearest wall left out: the next one along the ray
+    np.testing.assert_allclose(ray_distances(origins[:1], dirs[:1], walls, exclude=[0]), [5.0])
+    assert ray_distances(np.zeros((1, 2)), dirs[:1], np.zeros((0, 2, 2)))[0] == np.inf

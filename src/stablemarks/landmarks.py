@@ -28,6 +28,7 @@ import numpy as np
 
 from .errors import InputError, expected
 from .geometry import StereoCamera
+from .maps import Map, ray_distances
 from .planes import PlaneConfig, PlaneFit, plane_members
 
 REASON_NEAR_BOUNDARY = "near boundary"
@@ -69,6 +70,11 @@ class LandmarkConfig:
     """Width [px] of the area-matching window. A SAD region's border is only known to within the window
     (block matching spreads a depth edge over it), so the boundary gets the variance of a uniform
     distribution over that width, ``w²/12``, shared by both images. ``None``: the SAD block size."""
+    min_edge_step_sigma: float = 3.0
+    """A free edge is searched only where the map puts something at a different depth just beyond it: the
+    disparity step the map predicts across the edge must reach this many σ of the disparity noise
+    (``planes.disparity_noise_px``). Without a step the planar region runs on over the background (a
+    poster board a few centimetres in front of a perpendicular wall) and its end is not the edge."""
 
 
 @dataclass(frozen=True)
@@ -395,12 +401,16 @@ def landmarks_on_plane(
     plane_config: PlaneConfig = PlaneConfig(),
     window_px: float = 15.0,
     valid_columns: tuple[tuple[float, float], tuple[float, float]] | None = None,
+    world_map: Map | None = None,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection.
 
     ``valid_columns``: for the left and the right image, the first and last column where the disparity
     image can hold a match. An edge whose search window reaches beyond them is not searched: the region
     would end there at the image's (or the disparity range's) border, not at the plane's edge.
+    ``world_map``: when given, an edge with no depth step behind it (:func:`edge_depth_step`, below
+    ``min_edge_step_sigma``) is not searched either. Ends not searched (or not found) are placed from the
+    edge that was found with the map's length, and features near them are rejected like near a found one.
     """
     members = plane_members(fit, pairs, left_segments, plane_config)
     idx = np.flatnonzero(members)
@@ -418,6 +428,10 @@ def landmarks_on_plane(
             not (vc[0] + 1 < w[0] and w[1] < vc[1] - 1) for w, vc in zip(windows, valid_columns, strict=True)
         ):
             continue
+        if world_map is not None:
+            step = edge_depth_step(camera, fit.X, world_map, fit.plane, edge, window_px / 2 + 1)
+            if abs(step) < config.min_edge_step_sigma * plane_config.sigma_nu(camera):
+                continue
         b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px)
         if b is not None:
             boundaries.append(b)
@@ -425,15 +439,38 @@ def landmarks_on_plane(
         return PlaneLandmarks(fit, [], members, [])
     ref = min(boundaries, key=lambda b: b.sigma_along)
     cands = model_features(camera, fit, ref, pairs, idx)
-    # A free edge not found in this frame (out of the searchable part of the image) is still where the map
-    # puts it: the wall's length from the edge that was found. Features near it are near a boundary too.
+    # An end of the wall not found in this frame (not free, out of the searchable part of the image, or
+    # without a depth step) is still where the map puts it: the wall's length from the edge that was found.
+    # Features near it are near a boundary too.
     mapped = mapped_boundaries(fit.plane, boundaries, ref)
     return PlaneLandmarks(fit, boundaries, members, select(cands, boundaries + mapped, config))
 
 
 def mapped_boundaries(plane, boundaries: list[Boundary], ref: Boundary) -> list[Boundary]:
-    """The plane's free edges not found in this frame, placed the wall's length from ``ref`` (the map
-    fixes it) with ``ref``'s uncertainty, for the near-boundary rule."""
+    """The plane's ends not found in this frame (free or not: where a wall meets another, its edge is a
+    boundary too), placed the wall's length from ``ref`` (the map fixes it) with ``ref``'s uncertainty,
+    for the near-boundary rule."""
     found = {b.edge for b in boundaries}
     return [replace(ref, edge=e, P=ref.P + plane.length * ref.inward, inward=-ref.inward)
-            for e in plane.free_edges if e not in found]
+            for e in ("p1", "p2") if e not in found]
+
+
+def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, offset_px: float) -> float:
+    """Disparity [px] the map predicts ``offset_px`` columns beyond a wall's edge in the left image, minus
+    the wall's own disparity at the edge (from pose ``X``). Positive: something nearer than the wall lies
+    beyond the edge; the wall's negated disparity when no wall of the map is hit (open space)."""
+    P = plane.edge(edge)
+    inner = plane.point_at(np.array([min(0.3, 0.5 * plane.length)]), edge)[0]
+    u_e, u_i = camera.project_columns(X, np.stack([P, inner]))[:, 0]
+    if not np.isfinite(u_e + u_i):
+        return 0.0
+    u_out = u_e + np.sign(u_e - u_i) * offset_px
+    fb = camera.f * camera.baseline
+    _, Z_e = camera.to_camera(X, P)
+    ray = camera.column_ray(X, u_out)
+    origin = camera.optical_centres(X)[0]
+    ids = [w.id for w in world_map]
+    dist = ray_distances(origin, ray, world_map.segments(), exclude=[ids.index(plane.id)] if plane.id in ids else ())[0]
+    cam = camera.camera_pose(X)
+    Z_bg = dist * (ray @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
+    return float((fb / Z_bg if np.isfinite(Z_bg) and Z_bg > 0 else 0.0) - fb / Z_e)

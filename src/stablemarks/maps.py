@@ -267,6 +267,28 @@ def load_map(path: str | Path) -> Map:
 
 
 # ------------------------------------------------------------- visibility
+def _crossings(origins, rays, walls, exclude: Sequence[int] = ()):
+    """Ray/wall intersections: ``lam`` (N, K) along ``rays`` (N, 2) from ``origins`` and ``mu`` (N, K) along
+    each kept wall of ``walls`` (K, 2, 2) from its first end, NaN/inf where parallel."""
+    o = np.asarray(origins, dtype=float).reshape(-1, 2)
+    r = np.asarray(rays, dtype=float).reshape(-1, 2)
+    o = np.broadcast_to(o, r.shape)
+    walls = np.asarray(walls, dtype=float).reshape(-1, 2, 2)
+    keep = np.ones(len(walls), dtype=bool)
+    keep[list(exclude)] = False
+    walls = walls[keep]
+    a = walls[None, :, 0, :]  # (1,K,2)
+    s = (walls[:, 1, :] - walls[:, 0, :])[None]  # (1,K,2)
+    r = r[:, None, :]  # (N,1,2)
+    denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]
+    qp = a - o[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
+        mu = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
+    ok = (np.abs(denom) > 1e-12) & (mu >= 0) & (mu <= 1)
+    return np.where(ok, lam, np.nan)
+
+
 def segments_block(origins, targets, walls, exclude: Sequence[int] = ()) -> np.ndarray:
     """Whether the sight lines ``origins → targets`` (N, 2) cross any wall of ``walls`` (K, 2, 2).
 
@@ -276,22 +298,23 @@ def segments_block(origins, targets, walls, exclude: Sequence[int] = ()) -> np.n
     o = np.asarray(origins, dtype=float).reshape(-1, 2)
     t = np.asarray(targets, dtype=float).reshape(-1, 2)
     o = np.broadcast_to(o, t.shape)
-    walls = np.asarray(walls, dtype=float).reshape(-1, 2, 2)
-    keep = np.ones(len(walls), dtype=bool)
-    keep[list(exclude)] = False
-    walls = walls[keep]
-    if len(walls) == 0 or len(t) == 0:
+    if len(t) == 0 or len(np.asarray(walls).reshape(-1, 4)) == len(exclude):
         return np.zeros(len(t), dtype=bool)
-    r = (t - o)[:, None, :]  # (N,1,2)
-    a = walls[None, :, 0, :]  # (1,K,2)
-    s = (walls[:, 1, :] - walls[:, 0, :])[None]  # (1,K,2)
-    denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]
-    qp = a - o[:, None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
-        mu = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
-    hit = (np.abs(denom) > 1e-12) & (lam > 1e-9) & (lam < 1 - 1e-6) & (mu >= 0) & (mu <= 1)
-    return hit.any(axis=1)
+    lam = _crossings(o, t - o, walls, exclude)
+    with np.errstate(invalid="ignore"):
+        return ((lam > 1e-9) & (lam < 1 - 1e-6)).any(axis=1)
+
+
+def ray_distances(origins, directions, walls, exclude: Sequence[int] = ()) -> np.ndarray:
+    """Distance (N,) [m] from ``origins`` along unit ``directions`` (N, 2) to the first wall of ``walls``
+    (K, 2, 2) they hit, ``inf`` where none (walls with an index in ``exclude`` are ignored)."""
+    d = np.asarray(directions, dtype=float).reshape(-1, 2)
+    if len(d) == 0 or len(np.asarray(walls).reshape(-1, 4)) == len(exclude):
+        return np.full(len(d), np.inf)
+    lam = _crossings(origins, d, walls, exclude)
+    with np.errstate(invalid="ignore"):
+        lam = np.where(lam > 1e-9, lam, np.inf)
+    return lam.min(axis=1)
 
 
 @dataclass(frozen=True)

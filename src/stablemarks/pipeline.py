@@ -147,7 +147,7 @@ def select_landmarks(
             continue
         model = landmarks_on_plane(camera, fit, pairs, front.left_segments, front.disparity.right,
                                    config.landmarks, config.planes, float(config.sad.block_size),
-                                   valid_columns(front.disparity))
+                                   valid_columns(front.disparity), world_map)
         t_model += time.perf_counter() - tb
         if fit.plane.free_edges and not model.boundaries:
             warnings.append(f"plane {fit.plane.label!r}: no free edge found in view; its features are not modelled")

@@ -123,3 +123,26 @@ def test_se2_between_matches_odometry_increments(lab_scenario):
     U, cov = src.odometry(3)
     np.testing.assert_allclose(SE2.from_array(U).as_array(), run.odometry[3].as_array())
     assert_psd(cov)
+
+
+def test_records_replay_the_filter(lab_short, lab_scenario):
+    """The records hold everything the filter used (odometry, priors of new landmarks, measurements, pans):
+    replaying them through a fresh filter gives the same final state, so a smoother can use them too."""
+    from stablemarks.estimation import JointEKF, NewLandmark
+
+    run, result = lab_short
+    ekf = JointEKF(lab_scenario.camera, SimulatedSource(run).start_pose, result.cov0)
+    for rec in result.records:
+        if rec.odometry is not None:
+            ekf.predict(rec.odometry, rec.cov_odometry)
+        if rec.measurements:
+            ekf.update([(i, (ul, ur)) for i, ul, ur in rec.measurements], rec.pan, frame=rec.index)
+        for ids, values, cov in rec.landmark_priors:
+            new = []
+            for i, s in zip(ids, values, strict=True):
+                lm = result.ekf.landmark(i)
+                new.append(NewLandmark.wall(result.world_map[lm.plane_id], s, lm.edge, lm.z_low, lm.z_high))
+            ekf.add_landmarks(new, cov, ids=ids)
+    assert sum(len(r.measurements) for r in result.records) > 20
+    np.testing.assert_allclose(ekf.pose, result.ekf.pose, atol=1e-12)
+    np.testing.assert_allclose(ekf.cov_pose, result.ekf.cov_pose, atol=1e-15)

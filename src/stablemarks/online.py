@@ -147,6 +147,15 @@ class FrameRecord:
     warnings: list[str]
     timings: dict[str, float]
     visible_truth: list[str] = field(default_factory=list)
+    odometry: np.ndarray | None = None
+    """The odometry increment ``U`` (3,) that led to this frame (None for the first), in the robot frame."""
+    cov_odometry: np.ndarray | None = None
+    """Its covariance (3, 3)."""
+    measurements: list[tuple[int, float, float]] = field(default_factory=list)
+    """The update's observations: ``(landmark id, u_l, u_r)`` [px], each with noise ``ekf.sigma_img``."""
+    landmark_priors: list[tuple[list[int], list[float], np.ndarray]] = field(default_factory=list)
+    """Landmarks entered in this frame, in groups: ``(ids, initial state values, joint covariance)``; the
+    cross-covariance with the pose is zero for wall landmarks (DESIGN §4)."""
 
     def to_dict(self) -> dict:
         return {
@@ -157,6 +166,11 @@ class FrameRecord:
             "n_landmarks": self.n_landmarks, "n_pairs": self.n_pairs, "n_candidates": self.n_candidates,
             "n_selected": self.n_selected, "warnings": self.warnings, "timings": self.timings,
             "visible_truth": self.visible_truth,
+            "odometry": None if self.odometry is None else self.odometry.tolist(),
+            "cov_odometry": None if self.cov_odometry is None else self.cov_odometry.tolist(),
+            "measurements": [list(m) for m in self.measurements],
+            "landmark_priors": [{"ids": ids, "values": vals, "cov": cov.tolist()}
+                                for ids, vals, cov in self.landmark_priors],
         }
 
 
@@ -211,8 +225,10 @@ def _match_truth(truth, plane_id: str, P: np.ndarray, sigma: float) -> str | Non
     return best
 
 
-def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int) -> list[int]:
-    """Enter candidates as wall landmarks, jointly per boundary: ``Σ = σ_b² 11ᵀ + diag(σ_f²)`` (DESIGN §4)."""
+def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int, priors: list | None = None
+                        ) -> list[int]:
+    """Enter candidates as wall landmarks, jointly per boundary: ``Σ = σ_b² 11ᵀ + diag(σ_f²)`` (DESIGN §4).
+    Each group ``(ids, values, Σ)`` is appended to ``priors`` when given."""
     ids = []
     groups: dict[tuple[str, str], list] = {}
     for c in candidates:
@@ -223,7 +239,10 @@ def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int) -
         sf = np.array([c.sigma_f for c in group])
         cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
         new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high) for c in group]
-        ids += ekf.add_landmarks(new, cov, frame=frame)
+        added = ekf.add_landmarks(new, cov, frame=frame)
+        if priors is not None:
+            priors.append((added, [float(c.s) for c in group], cov))
+        ids += added
     return ids
 
 
@@ -281,6 +300,7 @@ def run_online(
     n = len(source)
     for k in range(n):
         t0 = time.perf_counter()
+        U = cov_U = None
         if k > 0:
             U, cov_U = source.odometry(k)
             ekf.predict(U, cov_U)
@@ -290,6 +310,7 @@ def run_online(
         t1 = time.perf_counter()
         timings = {"predict": t1 - t0}
         observed, nis, associated, new_ids, warnings = [], [], [], [], []
+        measurements, priors = [], []
         n_pairs = n_cand = n_sel = 0
         if method != "dead_reckoning":
             front = run_front_end(left, right, config)
@@ -316,6 +337,9 @@ def run_online(
                 chosen = ekf.select_for_update(assoc, pan)
                 if chosen:
                     res = ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k)
+                    used = {int(i) for i in res.ids}
+                    measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen
+                                    if int(i) in used]
                     observed = [int(i) for i in res.ids]
                     nis = [float(v) for v in res.nis]
             t3 = time.perf_counter()
@@ -326,7 +350,7 @@ def run_online(
             else:
                 take = sel.candidates if method == "plane_no_selection" else sel.selected
                 fresh = [c for c in take if c.pair not in used_pairs and not _duplicate(ekf, c)]
-                new_ids = _new_wall_landmarks(ekf, world_map, fresh, k)
+                new_ids = _new_wall_landmarks(ekf, world_map, fresh, k, priors)
                 if truth is not None:
                     for c in sel.candidates:
                         tid = _match_truth(truth, c.plane_id, c.P, c.sigma_s)
@@ -353,7 +377,8 @@ def run_online(
         records.append(FrameRecord(
             k, source.stamp(k), float(pan), ekf.pose, ekf.cov_pose, dr.as_array(), source.true_pose(k),
             observed, nis, associated, new_ids, ekf.n_landmarks, n_pairs, n_cand, n_sel, warnings, timings,
-            visible_truth,
+            visible_truth, None if U is None else np.asarray(U, dtype=float),
+            None if cov_U is None else np.asarray(cov_U, dtype=float), measurements, priors,
         ))
         if progress is not None:
             progress(k + 1, n)

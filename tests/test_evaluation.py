@@ -9,6 +9,7 @@ from stablemarks.cli import main
 from stablemarks.errors import InputError
 from stablemarks.evaluation import (
     SUMMARY_KEYS,
+    available_methods,
     check_backend,
     check_goals,
     make_trials,
@@ -18,7 +19,7 @@ from stablemarks.evaluation import (
 )
 from stablemarks.sim import load_scenario, simulate_run
 
-METHODS = ("stablemarks", "plane_no_selection", "all_segments", "dead_reckoning")
+METHODS = available_methods()
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +89,7 @@ def test_make_trials_validates():
     assert [(t.index, t.method) for t in trials] == [(0, "dead_reckoning"), (0, "stablemarks"),
                                                      (1, "dead_reckoning"), (1, "stablemarks")]
     with pytest.raises(InputError, match="methods: expected one of"):
-        make_trials(["lab"], 2, ["gtsam_batch"])
+        make_trials(["lab"], 2, ["no_such_method"])
     with pytest.raises(InputError, match="trials: expected a positive number"):
         make_trials(["lab"], 0)
     with pytest.raises(InputError, match="frames: expected a positive number"):

@@ -135,8 +135,9 @@ class NewLandmark:
     """A landmark to enter the filter: its kind, initial state value and the data kept beside it.
 
     ``value`` is ``(s,)`` [m] for a ``wall`` landmark (distance along ``plane`` from ``edge``) and ``(x, y)``
-    [m] in the map frame for a ``point`` landmark. ``z_low, z_high`` [m] are the line's ends (Eq 1), kept for
-    matching and output only. Build with :meth:`wall` or :meth:`point`.
+    [m] in the map frame for a ``point`` landmark. ``z_low, z_high`` [m] are the line's ends (Eq 1) and
+    ``polarity`` the sign of its brightness step in the left image (+1 dark to bright going right, -1 the
+    other way, 0 unknown), kept for matching and output only. Build with :meth:`wall` or :meth:`point`.
     """
 
     kind: str
@@ -145,6 +146,7 @@ class NewLandmark:
     edge: str = "p1"
     z_low: float | None = None
     z_high: float | None = None
+    polarity: int = 0
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -160,13 +162,13 @@ class NewLandmark:
 
     @classmethod
     def wall(cls, plane: ReferencePlane, s: float, edge: str = "p1", z_low: float | None = None,
-             z_high: float | None = None) -> NewLandmark:
-        return cls("wall", (float(s),), plane, edge, z_low, z_high)
+             z_high: float | None = None, polarity: int = 0) -> NewLandmark:
+        return cls("wall", (float(s),), plane, edge, z_low, z_high, int(polarity))
 
     @classmethod
-    def point(cls, xy, z_low: float | None = None, z_high: float | None = None) -> NewLandmark:
+    def point(cls, xy, z_low: float | None = None, z_high: float | None = None, polarity: int = 0) -> NewLandmark:
         xy = np.asarray(xy, dtype=float).reshape(-1)
-        return cls("point", tuple(float(v) for v in xy), None, "p1", z_low, z_high)
+        return cls("point", tuple(float(v) for v in xy), None, "p1", z_low, z_high, int(polarity))
 
     @property
     def dim(self) -> int:
@@ -192,6 +194,7 @@ class _Track:
     first_frame: int | None
     last_frame: int | None
     n_observed: int = 0
+    polarity: int = 0
     start: np.ndarray = field(init=False, repr=False)
     J_p_l: np.ndarray = field(init=False, repr=False)
 
@@ -229,6 +232,7 @@ class LandmarkEstimate:
     n_observed: int
     first_frame: int | None
     last_frame: int | None
+    polarity: int = 0
 
     def to_dict(self) -> dict:
         """Plain JSON/YAML-able fields (see :meth:`JointEKF.landmarks_to_dict`)."""
@@ -242,7 +246,8 @@ class LandmarkEstimate:
 
         d.update(position=self.position.tolist(), cov2d=self.cov2d.tolist(), z_low=plain(self.z_low, float),
                  z_high=plain(self.z_high, float), n_observed=int(self.n_observed),
-                 first_frame=plain(self.first_frame, int), last_frame=plain(self.last_frame, int))
+                 first_frame=plain(self.first_frame, int), last_frame=plain(self.last_frame, int),
+                 polarity=int(self.polarity))
         return d
 
 
@@ -454,7 +459,8 @@ class JointEKF:
             id=t.id, kind=t.kind, plane_id=t.plane.id if t.plane is not None else None,
             edge=t.edge if t.kind == "wall" else None, value=self._x[sl].copy(), cov=self._P[sl, sl].copy(),
             position=self.landmark_position(t.id), cov2d=self.landmark_cov2d(t.id), z_low=t.z_low,
-            z_high=t.z_high, n_observed=t.n_observed, first_frame=t.first_frame, last_frame=t.last_frame)
+            z_high=t.z_high, n_observed=t.n_observed, first_frame=t.first_frame, last_frame=t.last_frame,
+            polarity=t.polarity)
 
     def copy(self) -> JointEKF:
         """An independent copy of the filter."""
@@ -530,7 +536,8 @@ class JointEKF:
         self._P = P
         self._x = np.concatenate([self._x, np.concatenate([np.asarray(lm.value, float) for lm in new])])
         for i, lm in zip(ids, new, strict=True):
-            self._tracks[i] = _Track(i, lm.kind, lm.plane, lm.edge, lm.z_low, lm.z_high, frame, frame)
+            self._tracks[i] = _Track(i, lm.kind, lm.plane, lm.edge, lm.z_low, lm.z_high, frame, frame,
+                                     polarity=lm.polarity)
         self._next_id = max(self._next_id, max(ids) + 1)
         self._reindex()
         return ids
@@ -617,7 +624,11 @@ class JointEKF:
         d2 = np.einsum("cki,cij,ckj->ck", nu, np.linalg.inv(S), nu)
         cost = d2
         if extra_cost is not None:
-            cost = d2 + _matrix(extra_cost, (len(pred.ids), len(z)), "associate.extra_cost")[pred.in_view]
+            extra = np.asarray(extra_cost, dtype=float)
+            # +inf forbids a pair; anything else must be finite
+            extra = _matrix(np.where(extra == np.inf, 0.0, extra), (len(pred.ids), len(z)), "associate.extra_cost")
+            extra = np.where(np.asarray(extra_cost, dtype=float) == np.inf, np.inf, extra)
+            cost = d2 + extra[pred.in_view]
         return ids, z, d2, cost
 
     def associate(self, measured, pan: float = 0.0, candidates: Sequence[int] | None = None,
@@ -641,7 +652,7 @@ class JointEKF:
         Returns ``[(landmark id, measurement index), …]`` sorted by measurement index.
         """
         ids, z, d2, cost = self._association_costs(measured, pan, candidates, extra_cost)
-        feasible = d2 <= self.config.gate
+        feasible = (d2 <= self.config.gate) & np.isfinite(cost)
         if not feasible.any():
             return []
         c = len(ids)
@@ -685,10 +696,10 @@ class JointEKF:
         along by one). Pairs that pass the individual χ² gate are taken in order of increasing Mahalanobis
         distance (plus ``extra_cost``), each kept only if its landmark and measurement are still free and
         the joint NIS of the set stays inside the χ² gate of ``2n`` dof (sequential compatible nearest
-        neighbour, a greedy form of joint compatibility).
+        neighbour, a greedy form of joint compatibility). An infinite ``extra_cost`` forbids a pair.
         """
         ids, z, d2, cost = self._association_costs(measured, pan, candidates, extra_cost)
-        order = [(r, c) for r, c in zip(*np.nonzero(d2 <= self.config.gate), strict=True)]
+        order = [(r, c) for r, c in zip(*np.nonzero((d2 <= self.config.gate) & np.isfinite(cost)), strict=True)]
         order.sort(key=lambda rc: cost[rc])
         chosen: list[tuple[int, int]] = []
         used_r, used_c = set(), set()
@@ -800,7 +811,7 @@ class JointEKF:
         """The landmarks as plain dicts (JSON/YAML-able), in state order.
 
         Wall: ``id, kind, plane, edge, s, var_s``; point: ``id, kind, x, y, cov``; both: ``position,
-        cov2d, z_low, z_high, n_observed, first_frame, last_frame``.
+        cov2d, z_low, z_high, n_observed, first_frame, last_frame, polarity``.
         """
         return [self.landmark(i).to_dict() for i in self.landmark_ids]
 
@@ -874,6 +885,10 @@ def _parse_landmark(d: object, world_map: Map, where: str) -> tuple[NewLandmark,
     for key in ("z_low", "z_high"):
         if d.get(key) is not None:
             heights[key] = _number(d, key, where)
+    polarity = d.get("polarity", 0)
+    if polarity not in (-1, 0, 1) or isinstance(polarity, bool):
+        raise ConfigError(expected("-1, 0 or 1", polarity, where=f"{where}.polarity"))
+    heights["polarity"] = int(polarity)
     if kind == "wall":
         plane_id = d.get("plane")
         try:

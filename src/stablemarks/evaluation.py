@@ -11,6 +11,13 @@ as the robot would: when two methods believe different poses they look in slight
 and the images differ only by that pan. One task is one (scenario, trial, method); tasks run in parallel
 through joblib (:func:`evaluate`).
 
+Methods: those of :data:`stablemarks.online.METHODS` and, when the optional ``gtsam`` extra is installed,
+``gtsam_batch`` (:data:`SMOOTHER`): the batch smoother of :mod:`stablemarks.smoother` over the ``stablemarks``
+run of the same trial — the same odometry, the same landmark priors and the full method's associations and
+observations — solved by Levenberg–Marquardt: the accuracy reference the full method is compared with. It
+runs in the same task as that trial's ``stablemarks`` run when both are asked for, else it makes that run
+itself.
+
 Metrics (per scenario and method; :mod:`stablemarks.metrics` defines NEES, NIS, bounds, ATE):
 
 - ``nees_pose_mean`` — mean pose NEES over all frames and trials (3 dof); ``nees_pose_bounds`` — the 95 %
@@ -46,7 +53,12 @@ Metrics (per scenario and method; :mod:`stablemarks.metrics` defines NEES, NIS, 
   the rates of its own landmarks of the two groups.
 - ``time_per_frame`` — mean wall time [s] of the method's own work in a frame: front end, association and
   update, modelling and selection (the loop's ``total`` minus its ``predict`` stage, which holds the
-  odometry prediction and the simulator's rendering).
+  odometry prediction and the simulator's rendering); for ``gtsam_batch`` the smoothing time (graph,
+  optimisation and marginals) divided by the number of frames, without the run it smooths.
+
+For ``gtsam_batch`` the pose NEES uses the smoother's marginal covariances and the landmark NEES and error
+its smoothed landmarks; it has no NIS, and the selection and re-observation keys, which would only repeat
+those of the ``stablemarks`` run it smooths, are NaN.
 """
 
 from __future__ import annotations
@@ -56,6 +68,7 @@ import csv
 import io
 import json
 import math
+import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -64,9 +77,13 @@ import numpy as np
 from .config import Config
 from .errors import InputError, expected
 from .metrics import along_wall_nees, ate_rmse, chi2_bounds, fraction_inside, pose_nees, position_errors, reobservation
-from .online import METHODS, SimulatedSource, run_online
+from .online import METHODS, OnlineResult, SimulatedSource, run_online
 from .sim.run import Run, simulate_run
 from .sim.scenario import Scenario, load_scenario
+from .smoother import GTSAM_HINT, gtsam_available
+
+SMOOTHER = "gtsam_batch"
+"""The evaluation-only method: the batch smoother over the ``stablemarks`` run (needs the ``gtsam`` extra)."""
 
 BACKENDS = ("loky", "dask", "ray")
 """joblib backends :func:`evaluate` runs on; ``dask`` and ``ray`` need the optional extras of the same name."""
@@ -112,30 +129,38 @@ def trial_seeds(base: int, n: int) -> list[int]:
     return [int(c.generate_state(1, dtype=np.uint64)[0]) for c in children]
 
 
+def available_methods() -> tuple[str, ...]:
+    """The methods this installation evaluates: :data:`stablemarks.online.METHODS`, then :data:`SMOOTHER`
+    when gtsam is importable. The default method list of :func:`make_trials`."""
+    return METHODS + ((SMOOTHER,) if gtsam_available() else ())
+
+
 def check_methods(methods: Iterable[str]) -> tuple[str, ...]:
-    """Validate method names (:data:`stablemarks.online.METHODS`); duplicates dropped, order kept."""
+    """Validate method names (:func:`available_methods`); duplicates dropped, order kept."""
+    known = available_methods()
     out = tuple(dict.fromkeys(methods))
     if not out:
-        raise InputError(expected(f"at least one of {', '.join(METHODS)}", "none", where="methods"))
+        raise InputError(expected(f"at least one of {', '.join(known)}", "none", where="methods"))
     for m in out:
-        if m not in METHODS:
-            raise InputError(expected(f"one of {', '.join(METHODS)}", m, where="methods"))
+        if m not in known:
+            hint = f" ({GTSAM_HINT})" if m == SMOOTHER else ""
+            raise InputError(expected(f"one of {', '.join(known)}", m, where="methods") + hint)
     return out
 
 
-def make_trials(scenarios: Sequence[str], n_trials: int, methods: Sequence[str] = METHODS, *,
+def make_trials(scenarios: Sequence[str], n_trials: int, methods: Sequence[str] | None = None, *,
                 seed: int | None = None, frames: int | None = None, cov0=None,
                 config: Config = Config()) -> list[Trial]:
     """All tasks of an evaluation, scenario by scenario, trial by trial, method by method.
 
-    Loads (validates) every scenario first. ``seed``: base of :func:`trial_seeds` (default: each scenario's
-    own ``seed``).
+    Loads (validates) every scenario first. ``methods``: default :func:`available_methods`. ``seed``: base of
+    :func:`trial_seeds` (default: each scenario's own ``seed``).
     """
     if isinstance(n_trials, bool) or not isinstance(n_trials, int) or n_trials < 1:
         raise InputError(expected("a positive number of trials", n_trials, where="trials"))
     if frames is not None and (isinstance(frames, bool) or not isinstance(frames, int) or frames < 1):
         raise InputError(expected("a positive number of frames", frames, where="frames"))
-    methods = check_methods(methods)
+    methods = check_methods(available_methods() if methods is None else methods)
     cov0 = DEFAULT_COV0.copy() if cov0 is None else np.asarray(cov0, dtype=float)
     if cov0.shape != (3, 3) or not np.all(np.isfinite(cov0)) or np.any(np.linalg.eigvalsh(cov0) <= 0):
         raise InputError(expected("a positive definite (3, 3) covariance", cov0.tolist(), where="cov0"))
@@ -184,35 +209,87 @@ def run_trial(trial: Trial) -> dict:
     ``found`` / ``eligible`` (true features for recall), ``selected_truth``, ``rejected_truth`` (true edge
     ids the method's selection rules took / rejected); ``time_per_frame`` [s] and per-stage means.
     """
-    scenario = load_scenario(trial.scenario)
-    run = truncate_run(simulate_run(scenario, trial.seed), trial.frames)
-    source = TrialSource(run, trial.cov0)
-    result = run_online(source, cov0=trial.cov0, config=trial.config, method=trial.method)
-    T = result.true_poses
-    nees_pose = pose_nees(result.poses, result.covs, T)
-    err = position_errors(result.poses, T)
-    nis = [v for r in result.records for v in r.nis]
-    on_plane = _on_plane_features(scenario, source.edges)
-    lms = _landmark_measures(result, scenario, source.edges)
-    n_entered = sum(len(r.new) for r in result.records)
-    eligible = _eligible_features(result, scenario, source.edges, on_plane)
-    found = sorted(eligible & set(result.truth_of.values()))
+    return run_trials([trial])[0]
+
+
+def run_trials(trials: Sequence[Trial]) -> list[dict]:
+    """Run the tasks of one simulated run (same scenario, seed, frames, start covariance and configuration)
+    and measure each (:func:`run_trial`); :data:`SMOOTHER` smooths the ``stablemarks`` run, made once."""
+    if not trials:
+        return []
+    first = trials[0]
+    same = (first.scenario, first.seed, first.frames, first.cov0.tobytes(), first.config)
+    for t in trials[1:]:
+        if (t.scenario, t.seed, t.frames, t.cov0.tobytes(), t.config) != same:
+            raise InputError(expected(f"tasks of one run ({first.scenario} seed {first.seed})",
+                                      f"{t.scenario} seed {t.seed}", where="run_trials"))
+    scenario = load_scenario(first.scenario)
+    run = truncate_run(simulate_run(scenario, first.seed), first.frames)
+    runs: dict[str, tuple[TrialSource, OnlineResult]] = {}
+
+    def online(method: str) -> tuple[TrialSource, OnlineResult]:
+        if method not in runs:
+            source = TrialSource(run, first.cov0)
+            runs[method] = source, run_online(source, cov0=first.cov0, config=first.config, method=method)
+        return runs[method]
+
+    out = []
+    for t in trials:
+        if t.method == SMOOTHER:
+            out.append(_smoothed_measures(t, scenario, *online("stablemarks")))
+        else:
+            out.append(_online_measures(t, scenario, *online(t.method)))
+    return out
+
+
+def _online_measures(trial: Trial, scenario: Scenario, source: TrialSource, result: OnlineResult) -> dict:
+    """:func:`run_trial`'s dict for an on-line method's run."""
     stages: dict[str, list[float]] = {}
     for r in result.records:
         for key, v in r.timings.items():
             stages.setdefault(key, []).append(v)
+    landmarks = [result.ekf.landmark(lid) for lid in result.ekf.landmark_ids]
+    estimates = {lm.id: (lm.position, lm.cov2d) for lm in landmarks}
+    return _measures(trial, scenario, source, result, result.poses, result.covs, estimates,
+                     nis=[v for r in result.records for v in r.nis],
+                     time_per_frame=float(np.mean(np.subtract(stages["total"], stages["predict"]))),
+                     stage_times={k: float(np.mean(v)) for k, v in stages.items()})
+
+
+def _smoothed_measures(trial: Trial, scenario: Scenario, source: TrialSource, result: OnlineResult) -> dict:
+    """:func:`run_trial`'s dict for :data:`SMOOTHER` over the ``stablemarks`` run ``result``."""
+    from .smoother import batch_smooth
+
+    start = time.perf_counter()
+    smoothed = batch_smooth(result, source.camera, trial.config)
+    per_frame = (time.perf_counter() - start) / len(result.records)
+    estimates = {lid: (lm.position, lm.cov2d) for lid, lm in smoothed.landmarks.items()}
+    out = _measures(trial, scenario, source, result, smoothed.poses, smoothed.cov_poses, estimates, nis=[],
+                    time_per_frame=per_frame, stage_times={"smooth": per_frame})
+    out["rejected_truth"] = []  # the full method's selection, not the smoother's
+    return out
+
+
+def _measures(trial: Trial, scenario: Scenario, source: TrialSource, result: OnlineResult, poses, covs,
+              estimates: dict, *, nis: list[float], time_per_frame: float, stage_times: dict) -> dict:
+    """The measures of :func:`run_trial` for poses (K, 3) with covariances (K, 3, 3) and landmark estimates
+    ``{id: (position (2,), cov2d (2, 2))}`` over the run ``result`` (its landmarks, truth and records)."""
+    T = result.true_poses
+    err = position_errors(poses, T)
+    on_plane = _on_plane_features(scenario, source.edges)
+    eligible = _eligible_features(result, scenario, source.edges, on_plane)
     return {
         "scenario": scenario.name, "trial": trial.index, "seed": trial.seed, "method": trial.method,
         "frames": len(result.records),
-        "nees_pose": nees_pose.tolist(), "position_error": err.tolist(), "nis": nis,
-        "ate_rmse": ate_rmse(result.poses, T), "final_error": float(err[-1]),
-        "landmarks": lms, "n_landmarks": n_entered,
+        "nees_pose": pose_nees(poses, covs, T).tolist(), "position_error": err.tolist(), "nis": nis,
+        "ate_rmse": ate_rmse(poses, T), "final_error": float(err[-1]),
+        "landmarks": _landmark_measures(result, scenario, source.edges, estimates),
+        "n_landmarks": sum(len(r.new) for r in result.records),
         "n_true_features": sum(1 for tid in result.truth_of.values() if tid in on_plane),
-        "eligible": sorted(eligible), "found": found,
+        "eligible": sorted(eligible), "found": sorted(eligible & set(result.truth_of.values())),
         "selected_truth": sorted(set(result.truth_of.values())) if trial.method == "stablemarks" else [],
         "rejected_truth": sorted(result.rejected_truth),
-        "time_per_frame": float(np.mean(np.subtract(stages["total"], stages["predict"]))),
-        "stage_times": {k: float(np.mean(v)) for k, v in stages.items()},
+        "time_per_frame": time_per_frame, "stage_times": stage_times,
     }
 
 
@@ -222,20 +299,21 @@ def _on_plane_features(scenario: Scenario, edges: dict) -> set[str]:
     return {e.id for e in edges.values() if e.kind == "feature" and e.wall in refs}
 
 
-def _landmark_measures(result, scenario: Scenario, edges: dict) -> list[dict]:
-    """Along-wall NEES, position error and re-observation of each landmark with a known true feature."""
+def _landmark_measures(result, scenario: Scenario, edges: dict, estimates: dict) -> list[dict]:
+    """Along-wall NEES, position error and re-observation of each landmark with a known true feature;
+    ``estimates``: ``{landmark id: (position (2,), cov2d (2, 2))}``."""
     reobs = reobservation(result)
     out = []
     for lid, tid in sorted(result.truth_of.items()):
-        if lid not in result.ekf.landmark_ids or tid not in edges:
+        if lid not in estimates or tid not in edges:
             continue
-        lm = result.ekf.landmark(lid)
+        position, cov2d = estimates[lid]
         e = edges[tid]
         true_xy = np.array([e.x, e.y])
         direction = scenario.wall(e.wall).plane.direction
-        nees = along_wall_nees(lm.position, lm.cov2d, true_xy, direction)[0]
+        nees = along_wall_nees(position, cov2d, true_xy, direction)[0]
         out.append({"id": int(lid), "truth": tid, "nees": float(nees),
-                    "error": float(np.hypot(*(lm.position - true_xy))),
+                    "error": float(np.hypot(*(position - true_xy))),
                     "reobserved": list(reobs.get(lid, (0, 0)))})
     return out
 
@@ -327,11 +405,22 @@ def _parallel(Parallel):
     return Parallel()
 
 
+def _bundles(trials: Sequence[Trial]) -> list[list[Trial]]:
+    """The jobs: each task alone, except that a trial's ``stablemarks`` and :data:`SMOOTHER` tasks share one
+    job (the smoother reuses that run)."""
+    jobs: dict[tuple, list[Trial]] = {}
+    for t in trials:
+        key = (t.scenario, t.index) if t.method in ("stablemarks", SMOOTHER) else (t.scenario, t.index, t.method)
+        jobs.setdefault(key, []).append(t)
+    return list(jobs.values())
+
+
 def evaluate(trials: Sequence[Trial], *, jobs: int = 1, backend: str = "loky", address: str | None = None,
              progress: Callable[[int, int, dict], None] | None = None) -> list[dict]:
     """Run the tasks in parallel (joblib ``Parallel(n_jobs=jobs)`` on ``backend``) and return their
-    results (:func:`run_trial`) sorted by scenario, trial and method order. ``progress(done, total,
-    result)`` is called in this process as each task finishes."""
+    results (:func:`run_trial`) sorted by scenario, trial and method order. A trial's ``stablemarks`` and
+    :data:`SMOOTHER` tasks run as one job (:func:`run_trials`). ``progress(done, total, result)`` is called
+    in this process as each task finishes."""
     from joblib import Parallel, delayed, parallel_config
 
     check_backend(backend)
@@ -340,10 +429,11 @@ def evaluate(trials: Sequence[Trial], *, jobs: int = 1, backend: str = "loky", a
     results = []
     with _backend(backend, jobs, address), parallel_config(backend=backend, n_jobs=jobs):
         run_all = _parallel(Parallel)
-        for res in run_all(delayed(run_trial)(t) for t in trials):
-            results.append(res)
-            if progress is not None:
-                progress(len(results), len(trials), res)
+        for batch in run_all(delayed(run_trials)(b) for b in _bundles(trials)):
+            for res in batch:
+                results.append(res)
+                if progress is not None:
+                    progress(len(results), len(trials), res)
     order = {(t.scenario, t.index, t.method): k for k, t in enumerate(trials)}
     names = {t.scenario: load_scenario(t.scenario).name for t in trials}
     rank = {(names[s], i, m): k for (s, i, m), k in order.items()}
@@ -417,7 +507,7 @@ def summarize(results: Sequence[dict]) -> dict:
                 "time_per_frame": _mean(r["time_per_frame"] for r in rs),
                 "nees_pose_time": nees_t.tolist(),
             }
-            if method == "dead_reckoning":
+            if method in ("dead_reckoning", SMOOTHER):
                 for key in ("selection_precision", "selection_recall", "reobservation_selected",
                             "reobservation_rejected"):
                     out[scen][method][key] = math.nan
@@ -518,6 +608,10 @@ def check_goals(summary: dict) -> list[Goal]:
         rej = s["reobservation_rejected"]
         add("re-observation selected − rejected", s["reobservation_selected"] - rej, "> 0",
             s["reobservation_selected"] > rej)
+        ref = by_method.get(SMOOTHER)
+        if ref is not None:
+            ratio = _ratio(s["ate_rmse"], ref["ate_rmse"])
+            add(f"ATE / {SMOOTHER}'s ATE", ratio, "≤ 2", ratio <= 2.0)
         a = by_method.get("all_segments")
         if a is not None:
             add("ATE / all_segments' ATE", _ratio(s["ate_rmse"], a["ate_rmse"]), "< 1", s["ate_rmse"] < a["ate_rmse"])

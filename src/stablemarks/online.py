@@ -213,22 +213,27 @@ class OnlineResult:
 
 
 # ------------------------------------------------------------------ loop
-def _match_truth(truth, plane_id: str, P: np.ndarray, sigma: float) -> str | None:
-    """Id of the true image edge on the same wall nearest to ``P`` within max(3σ, 5 cm)."""
-    best, best_d = None, max(3.0 * sigma, 0.05)
+def _match_truth(truth, c, tol_px: float = 2.0) -> str | None:
+    """Id of the true image edge that candidate ``c`` was measured from: on the same wall, within ``tol_px``
+    of the candidate's columns in both images (nearest first), and within max(3σ, 5 cm) of its position."""
+    best, best_d = None, 2.0 * tol_px
     for e in truth.edges:
-        if e.wall != plane_id or not (e.visible_l and e.visible_r):
+        if e.wall != c.plane_id or not (e.visible_l and e.visible_r):
             continue
-        d = float(np.hypot(e.x - P[0], e.y - P[1]))
-        if d <= best_d:
-            best, best_d = e.id, d
-    return best
+        du = abs(e.u_l - c.u_left) + abs(e.u_r - c.u_right)
+        if du <= best_d and max(abs(e.u_l - c.u_left), abs(e.u_r - c.u_right)) <= tol_px:
+            best, best_d = e, du
+    if best is None or np.hypot(best.x - c.P[0], best.y - c.P[1]) > max(3.0 * c.sigma_s, 0.05):
+        return None
+    return best.id
 
 
-def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int, priors: list | None = None
-                        ) -> list[int]:
+def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int, priors: list | None = None,
+                        polarity: dict[int, int] | None = None) -> list[int]:
     """Enter candidates as wall landmarks, jointly per boundary: ``Σ = σ_b² 11ᵀ + diag(σ_f²)`` (DESIGN §4).
-    Each group ``(ids, values, Σ)`` is appended to ``priors`` when given."""
+    Each group ``(ids, values, Σ)`` is appended to ``priors`` when given; ``polarity`` maps a candidate's pair
+    index to its edge's polarity."""
+    polarity = polarity or {}
     ids = []
     groups: dict[tuple[str, str], list] = {}
     for c in candidates:
@@ -238,7 +243,7 @@ def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int, p
         sb = group[0].sigma_b
         sf = np.array([c.sigma_f for c in group])
         cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
-        new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high) for c in group]
+        new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
         added = ekf.add_landmarks(new, cov, frame=frame)
         if priors is not None:
             priors.append((added, [float(c.s) for c in group], cov))
@@ -317,6 +322,7 @@ def run_online(
             timings.update(front.timings)
             pairs = front.kept_pairs
             n_pairs = len(pairs)
+            pol = front.left_segments.polarity[pairs.left_index]
             t2 = time.perf_counter()
             used_pairs: set[int] = set()
             cam_k = camera.with_pan(pan)
@@ -331,7 +337,7 @@ def run_online(
                 n_sel = len(sel.selected)
             if ekf.n_landmarks and n_pairs:
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
-                assoc = associate_frame(ekf, pairs, measured, pan, sel)
+                assoc = associate_frame(ekf, pairs, measured, pan, sel, pol)
                 associated = [int(i) for i, _ in assoc]
                 used_pairs = {int(j) for _, j in assoc}
                 chosen = ekf.select_for_update(assoc, pan)
@@ -350,14 +356,15 @@ def run_online(
             else:
                 take = sel.candidates if method == "plane_no_selection" else sel.selected
                 fresh = [c for c in take if c.pair not in used_pairs and not _duplicate(ekf, c)]
-                new_ids = _new_wall_landmarks(ekf, world_map, fresh, k, priors)
+                new_ids = _new_wall_landmarks(ekf, world_map, fresh, k, priors,
+                                              {c.pair: int(pol[c.pair]) for c in fresh})
                 if truth is not None:
                     for c in sel.candidates:
-                        tid = _match_truth(truth, c.plane_id, c.P, c.sigma_s)
+                        tid = _match_truth(truth, c)
                         if tid is not None and not c.selected:
                             rejected_truth.setdefault(tid, c.reason)
                     for c, i in zip(fresh, new_ids, strict=True):
-                        tid = _match_truth(truth, c.plane_id, c.P, c.sigma_s)
+                        tid = _match_truth(truth, c)
                         if tid is not None:
                             truth_of[i] = tid
             if method == "all_segments" and truth is not None:
@@ -385,7 +392,8 @@ def run_online(
     return OnlineResult(source.name, method, records, ekf, world_map, first_view, truth_of, rejected_truth, cov0)
 
 
-def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, model=None) -> list[tuple[int, int]]:
+def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, model=None,
+                    polarity: np.ndarray | None = None) -> list[tuple[int, int]]:
     """Pairs (landmark id, segment-pair index) for this frame's update.
 
     Wall landmarks are found by the *pattern* of this frame's candidates along each wall (their positions
@@ -393,23 +401,30 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     wall are known to a few mm): :func:`match_along_wall`, kept if jointly compatible. Point landmarks, and
     wall landmarks the pattern leaves unmatched, go through the image-space association with joint
     compatibility and the vertical-extent cost; each such pair is added only if the whole set stays
-    jointly compatible.
+    jointly compatible. ``polarity`` (M,): the sign of each pair's brightness step; a landmark never matches
+    an edge of the opposite polarity (a bar's two edges, equally long and a bar's width apart, differ only in it).
     """
-    pattern: list[tuple[int, int]] = []
+    polarity = np.zeros(len(measured), dtype=int) if polarity is None else np.asarray(polarity, dtype=int)
+    in_view = set(ekf.visible(pan))
+    walls: list[list[tuple[int, int]]] = []
     if model is not None:
         for plane_model in model.planes:
-            pattern += match_along_wall(ekf, plane_model.fit.plane, plane_model.candidates)
-    in_view = set(ekf.visible(pan))
-    pattern = [(i, c) for i, c in pattern if i in in_view]
-    if pattern and not ekf.joint_compatible(pattern, measured, pan):
-        pattern = []
-    chosen = list(pattern)
+            matched = [(i, c) for i, c in match_along_wall(ekf, plane_model.fit.plane, plane_model.candidates,
+                                                           polarity=polarity)
+                       if i in in_view]
+            if matched:
+                walls.append(matched)
+    # Wall by wall, most features first: one wall's wrong pattern must not throw out the others' right ones.
+    chosen: list[tuple[int, int]] = []
+    for matched in sorted(walls, key=len, reverse=True):
+        if ekf.joint_compatible(chosen + matched, measured, pan):
+            chosen += matched
     taken_l = {i for i, _ in chosen}
     taken_p = {j for _, j in chosen}
     rest = [i for i in ekf.landmark_ids if i not in taken_l]
     free = [j for j in range(len(measured)) if j not in taken_p]
     if rest and free:
-        cost = _height_cost(ekf, pairs, pan)
+        cost = _height_cost(ekf, pairs, pan) + _polarity_cost(ekf, polarity)
         rows = [ekf.landmark_ids.index(i) for i in rest]
         sub = ekf.associate_joint(measured[free], pan, candidates=rest, extra_cost=cost[np.ix_(rows, free)])
         for i, j in sub:
@@ -419,7 +434,8 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     return sorted(chosen, key=lambda q: q[1])
 
 
-def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0) -> list[tuple[int, int]]:
+def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
+                     polarity: np.ndarray | None = None) -> list[tuple[int, int]]:
     """Match this frame's candidates on ``plane`` with the wall landmarks on it, by their pattern.
 
     Candidates and landmarks are placed along the wall (from ``p1``). The two sets differ by one common
@@ -449,6 +465,10 @@ def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0) -> list
     inter = np.clip(np.minimum(zh, ch) - np.maximum(zl, cl), 0.0, None)
     shorter = np.maximum(np.minimum(zh - zl, ch - cl), 1e-3)
     same_height = inter / shorter >= 0.5
+    if polarity is not None:  # an edge never matches one of the opposite brightness step
+        lp = np.array([[lm.polarity for lm in lms]])
+        cp = np.array([[polarity[cd.pair]] for cd in candidates])
+        same_height &= (lp * cp) >= 0
     best = None
     for i in range(len(c)):
         for j in range(len(a)):
@@ -497,6 +517,13 @@ def _height_cost(ekf: JointEKF, pairs, pan: float, weight: float = 9.0) -> np.nd
         union = np.maximum(np.maximum(vb, pairs.v_bottom) - np.minimum(vt, pairs.v_top), 1.0)
         cost[j] = weight * (1.0 - inter / union)
     return cost
+
+
+def _polarity_cost(ekf: JointEKF, polarity: np.ndarray, cost: float = np.inf) -> np.ndarray:
+    """(n_landmarks, n_pairs): ``cost`` (default: forbidden) where a landmark's and a pair's known polarities
+    differ, else 0."""
+    lp = np.array([ekf.landmark(i).polarity for i in ekf.landmark_ids], dtype=int)
+    return np.where(lp[:, None] * np.asarray(polarity, dtype=int)[None, :] < 0, cost, 0.0)
 
 
 def _duplicate(ekf: JointEKF, c) -> bool:

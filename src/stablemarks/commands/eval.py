@@ -31,9 +31,10 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..online import METHODS
+    from ..evaluation import available_methods
     from ..sim.scenario import builtin_scenarios
 
+    methods = available_methods()
     p.add_argument("scenarios", nargs="+", metavar="SCENARIO",
                    help=f"built-in scenario ({', '.join(builtin_scenarios())}) or a scenario YAML file")
     p.add_argument("--trials", type=int, default=10, metavar="N", help="trials per scenario (default 10)")
@@ -42,8 +43,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="joblib backend (default loky; dask and ray need the optional extras)")
     p.add_argument("--address", metavar="ADDR",
                    help="dask scheduler or ray cluster address (default: a local cluster of --jobs workers)")
-    p.add_argument("--methods", default=",".join(METHODS), metavar="M1,M2",
-                   help=f"comma-separated methods (default: all of {', '.join(METHODS)})")
+    p.add_argument("--methods", default=",".join(methods), metavar="M1,M2",
+                   help=f"comma-separated methods (default: all of {', '.join(methods)}; gtsam_batch, the batch "
+                        "smoother reference, needs pip install 'stablemarks[gtsam]')")
     p.add_argument("--frames", type=int, default=None, metavar="N", help="only the first N frames of each run")
     p.add_argument("--seed", type=int, default=None, metavar="S",
                    help="base seed of the trials (default: each scenario's seed)")

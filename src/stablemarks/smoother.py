@@ -1,0 +1,250 @@
+"""Batch smoother over a run's records: the evaluation's accuracy reference ``gtsam_batch`` (issue 6).
+
+The same data the on-line filter used (:class:`~stablemarks.online.FrameRecord`), as one nonlinear least
+squares problem solved by GTSAM's Levenberg–Marquardt (the optional ``gtsam`` extra):
+
+- a prior on the start pose ``X_0 ~ N(start, cov0)``;
+- one ``BetweenFactorPose2`` per odometry increment ``U_k = X_{k-1}⁻¹ X_k`` (paper Eq 19: ``X_k = X_{k-1} ⊕ U_k``
+  is :meth:`SE2.__matmul__ <stablemarks.geometry.SE2.__matmul__>` and gtsam's ``Pose2.compose``);
+- one factor per group of landmarks entered together: the joint Gaussian prior over their ``s`` along the
+  wall with the group's full covariance (the shared boundary error, DESIGN §4);
+- one factor per observation the filter used: ``(u_l, u_r) = J(X_k, P(s_j))`` with the frame's pan and
+  ``R = σ_img² I`` (Eqs 3 and 20), with the analytic Jacobians of
+  :meth:`StereoCamera.project_columns <stablemarks.geometry.StereoCamera.project_columns>`.
+
+The data associations are the filter's; only the estimation differs. The filter's covariances are over
+world ``(x, y, theta)`` and additive increments, gtsam's over the tangent space of ``Pose2`` at the pose
+(body frame): a covariance over ``(x, y)`` in the world is rotated by ``R(theta)ᵀ`` into gtsam's and back,
+exactly to first order (``Pose2.retract(δ) = X ⊕ δ`` for small ``δ``). Only wall landmarks (one number ``s``
+each, the ``stablemarks`` and ``plane_no_selection`` runs) are supported; landmarks loaded from a prior map
+have no recorded prior and enter through their observations alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import Config
+from .errors import InputError, expected
+from .geometry import SE2, StereoCamera, rot2
+from .maps import ReferencePlane
+
+GTSAM_HINT = "the gtsam_batch smoother needs the optional gtsam extra: pip install 'stablemarks[gtsam]'"
+
+BEHIND_CAMERA_ERROR = 1e6
+"""Residual [px] of an observation whose landmark falls behind the camera at a trial step: large and finite,
+so Levenberg–Marquardt rejects the step instead of propagating NaN."""
+
+
+def gtsam_available() -> bool:
+    """Whether the optional ``gtsam`` package can be imported."""
+    import importlib.util
+
+    return importlib.util.find_spec("gtsam") is not None
+
+
+def _gtsam():
+    try:
+        import gtsam
+    except ImportError:
+        raise InputError(GTSAM_HINT) from None
+    return gtsam
+
+
+@dataclass(frozen=True, eq=False)
+class SmoothedLandmark:
+    """One wall landmark after smoothing: ``s`` [m] along ``plane_id`` from ``edge``, its marginal variance
+    ``var_s`` [m²] (None without marginals), ``position`` (2,) [m] in the map frame and ``cov2d`` (2, 2) [m²]
+    (rank 1 along the wall, Eq 17; None without marginals)."""
+
+    id: int
+    plane_id: str
+    edge: str
+    s: float
+    var_s: float | None
+    position: np.ndarray
+    cov2d: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
+class SmootherResult:
+    """The batch estimate of a run.
+
+    Attributes
+    ----------
+    poses : (K, 3) ``(x [m], y [m], theta [rad])`` per frame, map frame.
+    cov_poses : (K, 3, 3) marginal covariances over world ``(x, y, theta)`` (None when not computed).
+    landmarks : ``{id: SmoothedLandmark}``.
+    iterations : Levenberg–Marquardt iterations.
+    error_initial, error_final : the graph's cost ``½ Σ ‖whitened residual‖²`` at the filter's estimate and at
+        the optimum.
+    """
+
+    poses: np.ndarray
+    cov_poses: np.ndarray | None
+    landmarks: dict[int, SmoothedLandmark]
+    iterations: int
+    error_initial: float
+    error_final: float
+
+
+# ----------------------------------------------------------------- frames
+def _pose_to_world(theta: float) -> np.ndarray:
+    """(3, 3) ``∂X/∂δ``: a ``Pose2`` tangent vector at heading ``theta`` (body frame) to world ``(x, y, theta)``."""
+    A = np.eye(3)
+    A[:2, :2] = rot2(theta)
+    return A
+
+
+def world_to_tangent_cov(cov_world: np.ndarray, theta: float) -> np.ndarray:
+    """A (3, 3) covariance over world ``(x, y, theta)`` [m², rad²] as gtsam's over the tangent space of a
+    ``Pose2`` with heading ``theta`` (body frame): ``A Σ Aᵀ`` with ``A = diag(R(theta)ᵀ, 1)``. An odometry
+    covariance over the increment's ``(dx, dy, dtheta)`` becomes the ``BetweenFactorPose2`` noise with
+    ``theta`` the increment's angle."""
+    A = _pose_to_world(theta).T
+    cov = A @ np.asarray(cov_world, dtype=float) @ A.T
+    return 0.5 * (cov + cov.T)
+
+
+def tangent_to_world_cov(cov_tangent: np.ndarray, theta: float) -> np.ndarray:
+    """Inverse of :func:`world_to_tangent_cov`: gtsam's ``Pose2`` marginal (body frame) over world ``(x, y, theta)``."""
+    A = _pose_to_world(theta)
+    cov = A @ np.asarray(cov_tangent, dtype=float) @ A.T
+    return 0.5 * (cov + cov.T)
+
+
+# ---------------------------------------------------------------- factors
+def observation(camera: StereoCamera, plane: ReferencePlane, edge: str, X, s: float):
+    """Predicted columns of a wall landmark and their Jacobians (Eqs 3 and 20, as the filter's).
+
+    ``camera`` is already panned for the frame; ``X`` (3,) the robot pose; ``s`` [m] the distance along
+    ``plane`` from ``edge``. Returns ``uv`` (2,) ``(u_l, u_r)`` [px] (NaN behind the camera), ``J_I_X`` (2, 3)
+    over world ``(x, y, theta)`` and ``J_I_s`` (2,).
+    """
+    t = plane.direction if edge == "p1" else -plane.direction
+    uv, J_I_X, J_I_p = camera.project_columns(X, plane.point_at(s, edge), jacobians=True)
+    return uv, J_I_X, J_I_p @ t
+
+
+def observation_factor(pose_key: int, landmark_key: int, camera: StereoCamera, plane: ReferencePlane,
+                       edge: str, measured, sigma_img: float):
+    """A gtsam ``CustomFactor`` on (``Pose2`` at ``pose_key``, 1-vector ``s`` at ``landmark_key``): residual
+    ``J(X, P(s)) − (u_l, u_r)`` [px] with noise ``σ_img² I`` and Jacobians w.r.t. gtsam's tangent spaces."""
+    gtsam = _gtsam()
+    z = np.asarray(measured, dtype=float).reshape(2)
+
+    def error(this, values, H):
+        pose = values.atPose2(pose_key)
+        X = np.array([pose.x(), pose.y(), pose.theta()])
+        s = float(values.atVector(landmark_key)[0])
+        uv, J_I_X, J_I_s = observation(camera, plane, edge, X, s)
+        if not np.all(np.isfinite(uv)):
+            if H is not None:
+                H[0], H[1] = np.zeros((2, 3)), np.zeros((2, 1))
+            return np.full(2, BEHIND_CAMERA_ERROR)
+        if H is not None:
+            H[0] = J_I_X @ _pose_to_world(X[2])
+            H[1] = J_I_s.reshape(2, 1)
+        return uv - z
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(2, sigma_img), [pose_key, landmark_key], error)
+
+
+def group_prior_factor(keys, values, cov):
+    """A gtsam ``CustomFactor`` on the 1-vectors ``s`` at ``keys`` (n,): the joint prior ``s ~ N(values, cov)``
+    of landmarks entered together (cov (n, n), full: their shared boundary error, DESIGN §4)."""
+    gtsam = _gtsam()
+    keys = [int(k) for k in keys]
+    mean = np.asarray(values, dtype=float).reshape(len(keys))
+    eye = np.eye(len(keys))
+
+    def error(this, vals, H):
+        if H is not None:
+            for j in range(len(keys)):
+                H[j] = eye[:, j : j + 1].copy()
+        return np.array([float(vals.atVector(k)[0]) for k in keys]) - mean
+
+    noise = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=float).reshape(len(keys), len(keys)))
+    return gtsam.CustomFactor(noise, keys, error)
+
+
+# ----------------------------------------------------------------- smooth
+def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, marginals: bool = True,
+                 max_iterations: int = 100) -> SmootherResult:
+    """Smooth a run of the on-line loop (:class:`~stablemarks.online.OnlineResult`) in one batch.
+
+    ``camera``: the stereo head of the run (unpanned; each frame's pan is in its record); ``config``: the
+    run's configuration (``config.ekf.sigma_img`` is the observation noise). The start pose prior is
+    ``N(records[0].dead_reckoning, result.cov0)``; the initial values are the filter's per-frame poses and
+    final landmark values. ``marginals``: also compute the marginal covariances of every pose and landmark.
+    Raises :class:`InputError` when gtsam is not installed or the run holds point landmarks.
+    """
+    gtsam = _gtsam()
+    from gtsam.symbol_shorthand import L, X
+
+    records = result.records
+    if not records:
+        raise InputError(expected("a run of at least one frame", "no records", where="batch_smooth.result"))
+    sigma_img = float(config.ekf.sigma_img)
+    graph = gtsam.NonlinearFactorGraph()
+    initial = gtsam.Values()
+    start = records[0].dead_reckoning
+    graph.add(gtsam.PriorFactorPose2(X(0), gtsam.Pose2(*start),
+                                     gtsam.noiseModel.Gaussian.Covariance(world_to_tangent_cov(result.cov0, start[2]))))
+    walls: dict[int, tuple[ReferencePlane, str]] = {}
+
+    def wall(lid: int) -> tuple[ReferencePlane, str]:
+        if lid not in walls:
+            lm = result.ekf.landmark(lid)
+            if lm.kind != "wall":
+                raise InputError(expected("wall landmarks (a stablemarks or plane_no_selection run)",
+                                          f"a {lm.kind} landmark (id {lid})", where="batch_smooth"))
+            walls[lid] = (result.world_map[lm.plane_id], lm.edge)
+            initial.insert(L(lid), np.array([float(lm.value[0])]))
+        return walls[lid]
+
+    for rec in records:
+        k = rec.index
+        initial.insert(X(k), gtsam.Pose2(*rec.pose))
+        if rec.odometry is not None:
+            U = rec.odometry
+            graph.add(gtsam.BetweenFactorPose2(
+                X(k - 1), X(k), gtsam.Pose2(*U),
+                gtsam.noiseModel.Gaussian.Covariance(world_to_tangent_cov(rec.cov_odometry, U[2]))))
+        cam_k = camera.with_pan(rec.pan)
+        for lid, u_l, u_r in rec.measurements:
+            plane, edge = wall(int(lid))
+            graph.add(observation_factor(X(k), L(int(lid)), cam_k, plane, edge, (u_l, u_r), sigma_img))
+        for ids, values, cov in rec.landmark_priors:
+            for lid in ids:
+                wall(int(lid))
+            graph.add(group_prior_factor([L(int(i)) for i in ids], values, cov))
+
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(int(max_iterations))
+    params.setRelativeErrorTol(1e-10)
+    params.setAbsoluteErrorTol(1e-12)
+    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
+    estimate = optimizer.optimize()
+
+    K = len(records)
+    poses = np.array([SE2(p.x(), p.y(), p.theta()).as_array()
+                      for p in (estimate.atPose2(X(r.index)) for r in records)])
+    cov_poses = None
+    var_s: dict[int, float | None] = dict.fromkeys(walls)
+    if marginals:
+        m = gtsam.Marginals(graph, estimate)
+        cov_poses = np.array([tangent_to_world_cov(m.marginalCovariance(X(r.index)), poses[i, 2])
+                              for i, r in enumerate(records)]).reshape(K, 3, 3)
+        var_s = {lid: float(m.marginalCovariance(L(lid))[0, 0]) for lid in walls}
+    landmarks = {}
+    for lid, (plane, edge) in sorted(walls.items()):
+        s = float(estimate.atVector(L(lid))[0])
+        t = plane.direction if edge == "p1" else -plane.direction
+        v = var_s[lid]
+        landmarks[lid] = SmoothedLandmark(lid, plane.id, edge, s, v, plane.point_at(s, edge),
+                                          None if v is None else v * np.outer(t, t))
+    return SmootherResult(poses, cov_poses, landmarks, int(optimizer.iterations()),
+                          float(graph.error(initial)), float(graph.error(estimate)))

@@ -22,14 +22,16 @@ wall (DESIGN.md §4), and landmarks modelled from one boundary share its varianc
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numba import njit
 
 from .errors import InputError, expected
 from .geometry import StereoCamera
 from .maps import Map, ray_distances
-from .planes import PlaneConfig, PlaneFit, plane_members
+from .planes import PlaneConfig, PlaneFit, median, plane_members
 
 REASON_NEAR_BOUNDARY = "near boundary"
 REASON_LENGTH = "low length similarity"
@@ -157,8 +159,8 @@ def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int) ->
     Returns rows and their boundary columns; rows whose region does not reach into the window are left out.
     """
     W = region.shape[1]
-    c0 = int(np.clip(np.floor(lo), 0, W - 1))
-    c1 = int(np.clip(np.ceil(hi), 0, W - 1))
+    c0 = math.floor(min(max(lo, 0), W - 1))
+    c1 = math.ceil(min(max(hi, 0), W - 1))
     if c1 < c0:
         return np.zeros(0, int), np.zeros(0)
     sub = region[:, c0 : c1 + 1]
@@ -175,8 +177,8 @@ def robust_rows(cols: np.ndarray, k: float) -> np.ndarray:
     """Mask of boundary columns within ``k`` robust σ (1.4826·MAD, at least 1 px) of their median."""
     if len(cols) == 0:
         return np.zeros(0, dtype=bool)
-    med = float(np.median(cols))
-    scale = max(1.0, 1.4826 * float(np.median(np.abs(cols - med))))
+    med = median(cols)
+    scale = max(1.0, 1.4826 * median(np.abs(cols - med)))
     return np.abs(cols - med) <= k * scale
 
 
@@ -187,14 +189,13 @@ def minimum_variance_column(cols: np.ndarray, lo: float, hi: float) -> tuple[flo
     The minimum of ``mean((b − m)²)`` over ``m`` is at the mean of ``b``; the search over integer columns
     is kept (it respects the window) and refined to the mean when the mean lies inside it.
     """
-    cand = np.arange(np.ceil(lo), np.floor(hi) + 1.0)
-    if len(cand) == 0:
-        cand = np.array([0.5 * (lo + hi)])
-    var = ((cols[None, :] - cand[:, None]) ** 2).mean(axis=1)
-    m = float(cand[int(np.argmin(var))])
-    mean = float(cols.mean())
-    if lo <= mean <= hi:
-        m = mean
+    m = float(cols.mean())
+    if not lo <= m <= hi:
+        cand = np.arange(np.ceil(lo), np.floor(hi) + 1.0)
+        if len(cand) == 0:
+            cand = np.array([0.5 * (lo + hi)])
+        var = ((cols[None, :] - cand[:, None]) ** 2).mean(axis=1)
+        m = float(cand[int(np.argmin(var))])
     return m, float(((cols - m) ** 2).mean())
 
 
@@ -214,17 +215,38 @@ def right_region(prediction, disparity_right: np.ndarray, row_margin: float = 0.
     v1 = min(H - 1, int(np.ceil(prediction.v_bottom.max() + row_margin)))
     if v1 < v0:
         return out
-    sub = disparity_right[v0 : v1 + 1, c0 : c1 + 1]
-    xs = np.arange(c0, c1 + 1, dtype=float)[None, :]
-    with np.errstate(invalid="ignore"):
-        u_left = xs + sub
-        d_pred = np.interp(u_left, prediction.columns, prediction.d, left=np.nan, right=np.nan)
-        s_pred = np.interp(u_left, prediction.columns, prediction.sigma_d, left=np.nan, right=np.nan)
-        ok = np.abs(sub - d_pred) <= prediction.gate * s_pred
-        vt = np.interp(u_left, prediction.columns, prediction.v_top)
-        vb = np.interp(u_left, prediction.columns, prediction.v_bottom)
-    rows = np.arange(v0, v1 + 1, dtype=float)[:, None]
-    out[v0 : v1 + 1, c0 : c1 + 1] = ok & (rows >= vt - row_margin) & (rows <= vb + row_margin)
+    out[v0 : v1 + 1, c0 : c1 + 1] = _right_band(
+        disparity_right[v0 : v1 + 1, c0 : c1 + 1], c0, v0, int(prediction.columns[0]), prediction.d,
+        prediction.sigma_d, prediction.v_top, prediction.v_bottom, float(prediction.gate), float(row_margin))
+    return out
+
+
+@njit(cache=True)
+def _right_band(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):  # pragma: no cover - numba
+    """:func:`right_region` on the box ``sub`` (h, w) of right disparities at rows ``v0…``, columns ``c0…``,
+    for a prediction whose window's columns are ``u0, u0 + 1, …`` (consecutive): the left column
+    ``u = x + d`` must lie in the window; the band there is interpolated as ``np.interp`` does."""
+    h, w = sub.shape
+    K = len(d)
+    u_last = u0 + K - 1
+    out = np.zeros((h, w), dtype=np.bool_)
+    for i in range(h):
+        v = float(v0 + i)
+        for k in range(w):
+            disp = float(sub[i, k])
+            u = float(c0 + k) + disp
+            if not (u >= u0 and u <= u_last):  # also NaN
+                continue
+            j = int(u - u0)
+            if j == K - 1:
+                dp, sp, vt, vb = d[j], sigma_d[j], v_top[j], v_bottom[j]
+            else:
+                frac = u - float(u0 + j)
+                dp = (d[j + 1] - d[j]) * frac + d[j]
+                sp = (sigma_d[j + 1] - sigma_d[j]) * frac + sigma_d[j]
+                vt = (v_top[j + 1] - v_top[j]) * frac + v_top[j]
+                vb = (v_bottom[j + 1] - v_bottom[j]) * frac + v_bottom[j]
+            out[i, k] = abs(disp - dp) <= gate * sp and v >= vt - row_margin and v <= vb + row_margin
     return out
 
 
@@ -319,28 +341,32 @@ def model_features(
     edge = boundary.edge
     t = _inward(plane, edge)
     P_edge = plane.edge(edge)
+    k = np.asarray(member_idx, dtype=int)
+    P_f, cov_f = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
+    ok = np.all(np.isfinite(P_f), axis=-1)
+    if not ok.any():
+        return []
+    k, P_f, cov_f = k[ok], P_f[ok], cov_f[ok]
+    P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
+    d_p = (P_hat - boundary.P) @ t
+    sigma_f = np.sqrt(np.einsum("i,kij,j->k", t, cov_hat, t))
+    var_s = boundary.sigma_along**2 + sigma_f**2
+    tt = np.outer(t, t)
+    Zc = camera.to_camera(X, P_hat)[1]
+    z_high = camera.heights(pairs.v_top[k], Zc)
+    z_low = camera.heights(pairs.v_bottom[k], Zc)
     out = []
-    for k in member_idx:
-        k = int(k)
-        P_f, cov_f = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
-        if not np.all(np.isfinite(P_f)):
-            continue
-        P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
-        d_p = float((P_hat - boundary.P) @ t)
-        sigma_f = float(np.sqrt(t @ cov_hat @ t))
-        var_s = boundary.sigma_along**2 + sigma_f**2
-        P = P_edge + d_p * t  # Eq 15
-        cov = var_s * np.outer(t, t)  # Eq 17: rank 1 along the wall
-        Zc = camera.to_camera(X, P_hat)[1]
-        z_high = float(camera.heights(pairs.v_top[k], Zc))
-        z_low = float(camera.heights(pairs.v_bottom[k], Zc))
+    for rank, j in enumerate(np.argsort(d_p, kind="stable")):
+        i = int(k[j])
         out.append(
-            Candidate(plane.id, plane.label, 0, k, edge, d_p, boundary.sigma_along, sigma_f, P, cov, z_low, z_high,
-                      float(pairs.length_similarity[k]), float(pairs.u_left[k]), float(pairs.u_right[k]),
-                      float(pairs.v_top[k]), float(pairs.v_bottom[k]), P_observed=P_hat, cov_observed=cov_hat)
+            Candidate(plane.id, plane.label, rank + 1, i, edge, float(d_p[j]), boundary.sigma_along, float(sigma_f[j]),
+                      P_edge + d_p[j] * t,  # Eq 15
+                      var_s[j] * tt,  # Eq 17: rank 1 along the wall
+                      float(z_low[j]), float(z_high[j]), float(pairs.length_similarity[i]), float(pairs.u_left[i]),
+                      float(pairs.u_right[i]), float(pairs.v_top[i]), float(pairs.v_bottom[i]),
+                      P_observed=P_hat[j], cov_observed=cov_hat[j])
         )
-    out.sort(key=lambda c: c.s)
-    return [_replace(c, index=i + 1) for i, c in enumerate(out)]
+    return out
 
 
 def select(candidates: list[Candidate], boundaries: list[Boundary], config: LandmarkConfig = LandmarkConfig()):

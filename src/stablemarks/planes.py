@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from numba import njit
 
 from .geometry import StereoCamera
 from .maps import Map, ReferencePlane, visible_parts
@@ -109,17 +110,23 @@ class PlanePrediction:
 
     def band(self, disparity: np.ndarray, row_margin: float = 0.0) -> np.ndarray:
         """Pixels (H, W) of a left-reference disparity image inside the plane's 3σ band (Sec 2.3.4)."""
-        H, W = disparity.shape
-        mask = np.zeros((H, W), dtype=bool)
-        u0, u1 = self.window
-        sub = disparity[:, u0 : u1 + 1]
-        with np.errstate(invalid="ignore"):
-            # a zero disparity is a point at infinity: never on a wall
-            ok = (np.abs(sub - self.d[None, :]) <= self.gate * self.sigma_d[None, :]) & (sub > 0)
-        rows = np.arange(H)[:, None]
-        ok &= (rows >= self.v_top[None, :] - row_margin) & (rows <= self.v_bottom[None, :] + row_margin)
-        mask[:, u0 : u1 + 1] = ok
+        rows, cols, ok = self.band_box(disparity, row_margin)
+        mask = np.zeros(disparity.shape, dtype=bool)
+        mask[rows, cols] = ok
         return mask
+
+    def band_box(self, disparity: np.ndarray, row_margin: float = 0.0) -> tuple[slice, slice, np.ndarray]:
+        """:meth:`band` inside its bounding box: ``(rows, cols, ok)``, ``ok`` (h, K) the band's pixels of
+        ``disparity[rows, cols]`` (the window's K columns, the rows the wall's top and bottom reach); the
+        band holds no pixel outside the box."""
+        H = disparity.shape[0]
+        u0, u1 = self.window
+        v0 = max(0, int(np.ceil(self.v_top.min() - row_margin)))
+        v1 = max(v0 - 1, min(H - 1, int(np.floor(self.v_bottom.max() + row_margin))))
+        rows, cols = slice(v0, v1 + 1), slice(u0, u1 + 1)
+        ok = _band(disparity[rows, cols], v0, self.d, self.sigma_d, self.v_top, self.v_bottom, float(self.gate),
+                   float(row_margin))
+        return rows, cols, ok
 
 
 def column_depth_on_wall(camera: StereoCamera, X, plane: ReferencePlane, u, *, jacobian: bool = False):
@@ -252,7 +259,8 @@ class PlaneFit:
     The observed wall is ``o = a + b (s − s0)``: ``s`` distance along the map wall from ``p1`` [m],
     ``o`` signed offset from the map wall's line along its normal [m]. ``cov_R`` (2, 2) is the covariance
     of ``R = (a, b)`` [m², m·1, 1]. ``region`` (H, W) marks the inlier pixels of the left image
-    (the planar region, Sec 2.4).
+    (the planar region, Sec 2.4); ``box`` ``(rows, cols)`` slices of the image outside which ``region``
+    holds no pixel.
     """
 
     plane: ReferencePlane
@@ -266,57 +274,46 @@ class PlaneFit:
     n_inliers: int
     chi2_dof: float
     X: np.ndarray = field(repr=False)
+    box: tuple[slice, slice] = (slice(None), slice(None))
 
     def __bool__(self) -> bool:
         return True
 
     def constraint(self, P) -> tuple[float, np.ndarray, np.ndarray]:
-        """Eq 12 for a point ``P`` (2,) in the world: ``G = o(P) − a − b (s(P) − s0)`` with
-        ``J_G_P`` (2,) and ``J_G_R`` (2,)."""
+        """Eq 12 for points ``P`` (..., 2) in the world: ``G = o(P) − a − b (s(P) − s0)`` (...,) with
+        ``J_G_P`` (2,) and ``J_G_R`` (..., 2)."""
         P = np.asarray(P, dtype=float)
-        s = float(self.plane.along(P))
-        o = float(self.plane.offset(P))
-        G = o - self.a - self.b * (s - self.s0)
+        ds = self.plane.along(P) - self.s0
+        G = self.plane.offset(P) - self.a - self.b * ds
         J_G_P = self.plane.normal - self.b * self.plane.direction
-        J_G_R = np.array([-1.0, -(s - self.s0)])
+        J_G_R = np.stack([np.full_like(ds, -1.0), -ds], axis=-1)
         return G, J_G_P, J_G_R
 
     def fuse_point(self, P, cov_P) -> tuple[np.ndarray, np.ndarray]:
-        """Combine a triangulated point with the fitted plane by one Kalman update (Eqs 12–14).
+        """Combine triangulated points with the fitted plane by one Kalman update each (Eqs 12–14).
 
         ``Y = H L + V`` with ``H = ∂G/∂L`` and ``Σ_V = G_R Σ_R G_Rᵀ`` (Eq 14); the covariance uses the Joseph
-        form. ``G`` is linear in ``L``, so one update is exact. Returns ``(P̂, Σ̂)`` in the world frame.
+        form. ``G`` is linear in ``L``, so one update is exact. ``P`` (..., 2), ``cov_P`` (..., 2, 2);
+        returns ``(P̂, Σ̂)`` of the same shapes in the world frame.
         """
         P = np.asarray(P, dtype=float)
         cov_P = np.asarray(cov_P, dtype=float)
         G, H, G_R = self.constraint(P)
-        var_V = float(G_R @ self.cov_R @ G_R)
-        S = float(H @ cov_P @ H) + var_V
-        K = cov_P @ H / S
-        P_hat = P - K * G  # innovation 0 − G(L̃)
-        IKH = np.eye(2) - np.outer(K, H)
-        cov_hat = IKH @ cov_P @ IKH.T + var_V * np.outer(K, K)
-        return P_hat, 0.5 * (cov_hat + cov_hat.T)
+        var_V = np.einsum("...i,ij,...j->...", G_R, self.cov_R, G_R)
+        PH = cov_P @ H
+        S = PH @ H + var_V
+        K = PH / S[..., None]
+        P_hat = P - K * G[..., None]  # innovation 0 − G(L̃)
+        IKH = np.eye(2) - K[..., :, None] * H
+        KK = K[..., :, None] * K[..., None, :]
+        cov_hat = IKH @ cov_P @ np.swapaxes(IKH, -1, -2) + var_V[..., None, None] * KK
+        return P_hat, 0.5 * (cov_hat + np.swapaxes(cov_hat, -1, -2))
 
     def point_on_line(self, s) -> np.ndarray:
         """World points on the fitted line at distances ``s`` along the map wall."""
         s = np.asarray(s, dtype=float)
         o = self.a + self.b * (s - self.s0)
         return self.plane.point_at(s) + o[..., None] * self.plane.normal
-
-
-def pixels_to_world(camera: StereoCamera, X, u, d) -> tuple[np.ndarray, np.ndarray]:
-    """World points (N, 2) of left pixels with disparity ``d``, and their world direction of depth error
-    (N, 2) per metre of depth (for weighting), using the mean pose ``X``."""
-    fb = camera.f * camera.baseline
-    Z = fb / d
-    Xc = (u - camera.cu) * Z / camera.f
-    P = camera.from_camera(X, Xc, Z)
-    cam = camera.camera_pose(X)
-    fwd = np.array([np.cos(cam.theta), np.sin(cam.theta)])
-    right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
-    w = fwd[None, :] + ((u - camera.cu) / camera.f)[:, None] * right[None, :]
-    return P, w
 
 
 def fit_plane(
@@ -333,88 +330,181 @@ def fit_plane(
     dropped and the fit repeated (clutter in front of the wall does not bend it).
     """
     plane = prediction.plane
-    band = prediction.band(disparity, config.row_margin_px)
-    vs, us = np.nonzero(band)
-    if len(us) < config.min_pixels:
-        return FailedFit(plane, f"{len(us)} disparity pixels in the predicted band (need {config.min_pixels})", len(us))
+    rows, cols, band = prediction.band_box(disparity, config.row_margin_px)
+    n = int(np.count_nonzero(band))
+    if n < config.min_pixels:
+        return FailedFit(plane, f"{n} disparity pixels in the predicted band (need {config.min_pixels})", n)
     if np.count_nonzero(band.any(axis=0)) < config.min_columns:
-        return FailedFit(plane, "band pixels span too few columns", len(us))
+        return FailedFit(plane, "band pixels span too few columns", n)
+    # Every pixel of the band's box in the wall frame, placed with the mean pose: the left pixel at column
+    # u with depth Z is at c + Z r(u), r(u) = fwd + (u − cu)/f · right the world direction of unit depth.
+    X = np.asarray(X, dtype=float)
+    cam = camera.camera_pose(X)
+    fwd = np.array([np.cos(cam.theta), np.sin(cam.theta)])
+    right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
+    r = fwd + ((prediction.columns - camera.cu) / camera.f)[:, None] * right  # (K, 2)
+    r_s, r_o = r @ plane.direction, r @ plane.normal
+    c_s, c_o = float(plane.along(cam.translation)), float(plane.offset(cam.translation))
+    fb = camera.f * camera.baseline
     # Fit on every other row and column (neighbouring pixels share their SAD window anyway), then
     # classify every band pixel with the final line.
-    sub = np.flatnonzero(((vs % 2) == 0) & ((us % 2) == 0))
-    if len(sub) < config.min_pixels // 4:
-        sub = np.arange(len(us))
-    d = disparity[vs, us].astype(float)
-    P, w = pixels_to_world(camera, X, us.astype(float), d)
-    fb = camera.f * camera.baseline
-    Z = fb / d
-    sigma_Z = Z**2 / fb * config.sigma_nu(camera)
-    s_all = plane.along(P)
-    o_all = plane.offset(P)
-    sigma_all = np.abs(w @ plane.normal) * sigma_Z + 1e-6
-    s, o, sigma_o = s_all[sub], o_all[sub], sigma_all[sub]
+    disp = disparity[rows, cols]
+    frame = (r_s, r_o, c_s, c_o, fb, config.sigma_nu(camera))
+    if np.count_nonzero(band[rows.start % 2 :: 2, cols.start % 2 :: 2]) < config.min_pixels // 4:
+        s, o, sigma_o = _wall_points(disp, band, 0, 0, 1, *frame)
+    else:
+        s, o, sigma_o = _wall_points(disp, band, rows.start % 2, cols.start % 2, 2, *frame)
+    w_all = 1.0 / sigma_o**2
     # Robust start: the median offset, then reweighted least squares with outlier rejection.
     inl = np.ones(len(s), dtype=bool)
-    a, b = float(np.median(o)), 0.0
-    s0 = float(np.median(s))
+    a, b = median(o), 0.0
+    s0 = median(s)
     scale = 1.0
+    min_inliers = max(3, len(s) * config.min_pixels // (2 * n))
     for _ in range(4):
-        r = (o - a - b * (s - s0)) / sigma_o
+        res = (o - a - b * (s - s0)) / sigma_o
         # the data's own spread, not the model's σ: disparity noise is often below σ_ν, and clutter
         # a few tens of cm in front of a wall is then still separable
-        scale = max(1e-3, 1.4826 * float(np.median(np.abs(r[inl]))))
-        inl = np.abs(r) <= config.outlier_sigma * scale
-        if inl.sum() < max(3, len(sub) * config.min_pixels // (2 * len(us))):
-            return FailedFit(plane, "too few pixels agree on one wall line", len(us))
-        wgt = 1.0 / sigma_o[inl] ** 2
-        s0 = float(np.sum(wgt * s[inl]) / np.sum(wgt))
-        A = np.stack([np.ones(inl.sum()), s[inl] - s0], axis=1)
-        N = A.T @ (A * wgt[:, None])
-        if np.linalg.cond(N) > 1e12:
-            return FailedFit(plane, "wall seen over too short a span to fit", len(us))
-        a, b = np.linalg.solve(N, A.T @ (wgt * o[inl]))
-    r = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
-    dof = max(1, int(inl.sum()) - 2)
-    chi2_dof = float(r @ r) / dof
+        scale = max(1e-3, 1.4826 * median(np.abs(res[inl])))
+        inl = np.abs(res) <= config.outlier_sigma * scale
+        if np.count_nonzero(inl) < min_inliers:
+            return FailedFit(plane, "too few pixels agree on one wall line", n)
+        wgt, s_in, o_in = w_all[inl], s[inl], o[inl]
+        sum_w = float(wgt.sum())
+        s0 = float(wgt @ s_in) / sum_w
+        ds = s_in - s0
+        w_ds = wgt * ds
+        N = np.array([[sum_w, w_ds.sum()], [w_ds.sum(), w_ds @ ds]])
+        N_inv = _inverse_spd2(N)
+        if N_inv is None:
+            return FailedFit(plane, "wall seen over too short a span to fit", n)
+        a, b = (float(v) for v in N_inv @ np.array([wgt @ o_in, w_ds @ o_in]))
+    res = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
+    chi2_dof = float(res @ res) / max(1, int(np.count_nonzero(inl)) - 2)
     # one independent measurement per `correlation_px` pixels of the full band (the subsample carries
-    # len(sub)/len(us) of its information)
-    cov_R = np.linalg.inv(N) * max(1.0, chi2_dof) * config.correlation_px * len(sub) / len(us)
-    r_all = (o_all - a - b * (s_all - s0)) / sigma_all
-    keep = np.abs(r_all) <= config.outlier_sigma * scale
-    region = np.zeros_like(band)
-    region[vs[keep], us[keep]] = True
-    return PlaneFit(plane, prediction, float(a), float(b), s0, cov_R, region, len(us), int(keep.sum()), chi2_dof,
-                    np.asarray(X, dtype=float))
+    # len(s)/n of its information)
+    cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
+    keep = _on_line(disp, band, *frame, a, b, s0, config.outlier_sigma * scale)
+    region = np.zeros(disparity.shape, dtype=bool)
+    region[rows, cols] = keep
+    return PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, int(np.count_nonzero(keep)),
+                    chi2_dof, X, (rows, cols))
 
 
-def segment_in_region(region: np.ndarray, pixels: np.ndarray) -> float:
-    """Fraction of a segment's pixels ``(n, 2)`` given as integer ``(u, v)`` that lie in ``region`` (H, W)."""
-    if len(pixels) == 0:
-        return 0.0
-    u = np.clip(pixels[:, 0], 0, region.shape[1] - 1)
-    v = np.clip(pixels[:, 1], 0, region.shape[0] - 1)
-    return float(region[v, u].mean())
+# Per-pixel loops of the band and the fit, over the band's box (see PlanePrediction.band_box). A left pixel
+# at column u with disparity d is at depth Z = f b / d, at distance c_s + Z r_s(u) along the wall and
+# offset c_o + Z r_o(u) from it, with σ of the offset |r_o(u)| Z² σ_ν / (f b) (depth σ on the normal).
+@njit(cache=True)
+def _band(disp, v0, d, sigma_d, v_top, v_bottom, gate, row_margin):  # pragma: no cover - numba
+    """Band mask (h, K) of the disparity box ``disp`` whose first row is ``v0``."""
+    h, K = disp.shape
+    ok = np.empty((h, K), dtype=np.bool_)
+    for i in range(h):
+        v = v0 + i
+        for k in range(K):
+            x = float(disp[i, k])
+            # a zero disparity is a point at infinity: never on a wall
+            ok[i, k] = ((abs(x - d[k]) <= gate * sigma_d[k]) & (x > 0)
+                        & (v >= v_top[k] - row_margin) & (v <= v_bottom[k] + row_margin))
+    return ok
+
+
+@njit(cache=True)
+def _wall_points(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu):  # pragma: no cover - numba
+    """``(s, o, σ_o)`` (n,) of the band pixels in rows ``i0, i0 + step, …`` and columns ``k0, k0 + step, …``
+    of the box, row by row."""
+    h, K = disp.shape
+    n = 0
+    for i in range(i0, h, step):
+        for k in range(k0, K, step):
+            n += band[i, k]
+    s = np.empty(n)
+    o = np.empty(n)
+    sigma = np.empty(n)
+    n = 0
+    for i in range(i0, h, step):
+        for k in range(k0, K, step):
+            if band[i, k]:
+                Z = fb / float(disp[i, k])
+                s[n] = c_s + Z * r_s[k]
+                o[n] = c_o + Z * r_o[k]
+                sigma[n] = abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6
+                n += 1
+    return s, o, sigma
+
+
+@njit(cache=True)
+def _on_line(disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu, a, b, s0, limit):  # pragma: no cover - numba
+    """Band pixels (h, K) within ``limit`` σ of the line ``o = a + b (s − s0)``."""
+    h, K = disp.shape
+    keep = np.zeros((h, K), dtype=np.bool_)
+    for i in range(h):
+        for k in range(K):
+            if band[i, k]:
+                Z = fb / float(disp[i, k])
+                s = c_s + Z * r_s[k]
+                o = c_o + Z * r_o[k]
+                keep[i, k] = abs((o - a - b * (s - s0)) / (abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6)) <= limit
+    return keep
+
+
+def median(x: np.ndarray) -> float:
+    """``np.median`` of a 1-D array of finite numbers (at least one), without its overhead (one partition)."""
+    k = len(x) // 2
+    p = np.partition(x, k)
+    return float(p[k]) if len(x) % 2 else float((p[:k].max() + p[k]) / 2)
+
+
+def _inverse_spd2(N: np.ndarray, max_cond: float = 1e12) -> np.ndarray | None:
+    """Inverse of a symmetric positive semi-definite 2×2 matrix, None when its condition number (ratio of
+    its eigenvalues) exceeds ``max_cond``."""
+    p, q, r = N[0, 0], N[0, 1], N[1, 1]
+    det = p * r - q * q
+    lam_max = 0.5 * (p + r) + np.hypot(0.5 * (p - r), q)
+    if not lam_max > 0 or not det / lam_max * max_cond >= lam_max:  # the smaller eigenvalue is det / lam_max
+        return None
+    return np.array([[r, -q], [-q, p]]) / det
 
 
 def plane_members(fit: PlaneFit, pairs, left_segments, config: PlaneConfig = PlaneConfig()) -> np.ndarray:
     """Segment pairs that belong to a fitted planar region (Sec 2.4): boolean mask over ``pairs``.
 
     A pair belongs when at least ``member_min_fraction`` of its left segment's pixels lie in the region
-    (dilated by ``member_dilate_px``: an edge pixel sits on the region's border), and its own disparity
-    agrees with the plane's predicted disparity at its column within the 3σ gate.
+    (dilated by ``member_dilate_px``: an edge pixel sits on the region's border; pixels outside the
+    image count at the nearest border pixel), and its own disparity agrees with the plane's predicted
+    disparity at its column within the 3σ gate.
     """
     n = len(pairs)
+    out = np.zeros(n, dtype=bool)
     if n == 0:
-        return np.zeros(0, dtype=bool)
-    region = dilate(fit.region, config.member_dilate_px)
+        return out
     u0, u1 = fit.prediction.window
     d_pred, s_pred = fit.prediction.disparity_at(pairs.u_left)
     inside = (pairs.u_left >= u0 - 0.5) & (pairs.u_left <= u1 + 0.5)
-    agree = inside & (np.abs(pairs.disparity - d_pred) <= fit.prediction.gate * s_pred)
-    out = np.zeros(n, dtype=bool)
-    for k in np.flatnonzero(agree):
-        frac = segment_in_region(region, left_segments.pixels(int(pairs.left_index[k])))
-        out[k] = frac >= config.member_min_fraction
+    agree = np.flatnonzero(inside & (np.abs(pairs.disparity - d_pred) <= fit.prediction.gate * s_pred))
+    if len(agree) == 0:
+        return out
+    # the dilated region within the fit's box grown by the dilation (it is empty elsewhere)
+    H, W = fit.region.shape
+    px = max(0, config.member_dilate_px)
+    v0, v1, _ = fit.box[0].indices(H)
+    c0, c1, _ = fit.box[1].indices(W)
+    v0, v1, c0, c1 = max(0, v0 - px), min(H, v1 + px), max(0, c0 - px), min(W, c1 + px)
+    region = dilate(fit.region[v0:v1, c0:c1], px)
+    # every pixel of the agreeing pairs' left segments, segment after segment
+    seg = np.asarray(pairs.left_index)[agree].astype(np.int64)
+    starts = left_segments.pixel_offsets[seg]
+    counts = left_segments.pixel_offsets[seg + 1] - starts
+    ends = np.cumsum(counts)
+    pix = left_segments.pixel_uv[np.repeat(starts - ends + counts, counts) + np.arange(ends[-1])]
+    u = np.clip(pix[:, 0], 0, W - 1) - c0
+    v = np.clip(pix[:, 1], 0, H - 1) - v0
+    ok = (u >= 0) & (u < region.shape[1]) & (v >= 0) & (v < region.shape[0])
+    hit = np.zeros(len(pix))
+    hit[ok] = region[v[ok], u[ok]]
+    n_in = np.bincount(np.repeat(np.arange(len(seg)), counts), weights=hit, minlength=len(seg))
+    frac = np.where(counts > 0, n_in / np.maximum(counts, 1), 0.0)
+    out[agree] = frac >= config.member_min_fraction
     return out
 
 

@@ -20,9 +20,10 @@ def rendered(tmp_path_factory):
 
 def test_select_on_a_rendered_frame(rendered, tmp_path, capsys):
     out = tmp_path / "sel"
+    pan = json.loads((rendered / "groundtruth.json").read_text())["frames"][0]["pan"]  # the head looked 5° left
     code = main(["select", str(rendered / "frame_000000_left.png"), str(rendered / "frame_000000_right.png"),
                  "--map", str(rendered / "map.yaml"), "--pose", "0,0,90deg", "--pose-sigma", "0.05,0.05,1deg",
-                 "--calib", str(rendered), "--out", str(out), "--mm"])
+                 "--pan", str(pan), "--calib", str(rendered), "--out", str(out), "--mm"])
     assert code == 0
     with (out / "landmarks.csv").open() as fh:
         rows = list(csv.DictReader(fh))

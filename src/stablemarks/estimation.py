@@ -435,6 +435,11 @@ class JointEKF:
     def n_landmarks(self) -> int:
         return len(self._tracks)
 
+    def landmark_plane(self, landmark_id: int) -> ReferencePlane | None:
+        """The wall a ``wall`` landmark lies on (None for a point landmark)."""
+        self._rows([landmark_id], "landmark_plane")
+        return self._tracks[int(landmark_id)].plane
+
     def state_slice(self, landmark_id: int) -> slice:
         """Where a landmark's ``(s,)`` or ``(x, y)`` sits in :attr:`state`."""
         return self._slice_of_row(int(self._rows([landmark_id], "state_slice")[0]))

@@ -25,17 +25,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+import cv2
 import numpy as np
 from numba import njit
 
 from .errors import InputError, expected
 from .geometry import StereoCamera
-from .maps import Map, ray_distances
+from .maps import Map, ray_distances, segments_block
 from .planes import PlaneConfig, PlaneFit, median, plane_members
 
 REASON_NEAR_BOUNDARY = "near boundary"
 REASON_LENGTH = "low length similarity"
 REASON_OUTSIDE = "outside the plane"
+REASON_CONTRAST = "low contrast"
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,9 @@ class LandmarkConfig:
         if not 0.0 <= self.min_length_similarity <= 1.0:
             raise InputError(expected("a number in [0, 1]", self.min_length_similarity,
                                       where="landmarks.min_length_similarity"))
+        if not (np.isfinite(self.min_contrast) and self.min_contrast >= 0):
+            raise InputError(expected("a number of gray levels >= 0", self.min_contrast,
+                                      where="landmarks.min_contrast"))
 
     boundary_sigma: float = 3.0
     """Width of the unstable boundary region and of the feature's interval, in σ (Sec 4)."""
@@ -59,6 +64,11 @@ class LandmarkConfig:
     paper's rejection."""
     min_length_similarity: float = 0.7
     """Reject pairs with ``ℓ_s`` (Eq 18) below this (Sec 4)."""
+    min_contrast: float = 30.0
+    """Reject features whose brightness step across the line (the left segment's mean ``|Sobel_x| / 4``) is
+    below this many gray levels. Beyond the paper: a textured wall (wood grain, fabric, speckled paint) yields
+    many short, weak vertical edges that are stable in place but alike and easily confused; painted lines,
+    frames and panel edges step by tens of gray levels. 0 keeps every edge."""
     search_sigma: float = 3.0
     """Half-width of the boundary search window in σ of the predicted edge column (Eq 6)."""
     min_boundary_rows: int = 15
@@ -119,6 +129,7 @@ class Candidate:
     length_similarity : ``ℓ_s`` (Eq 18).
     selected, reason : the selection decision and, when rejected, why (Sec 4).
     P_observed, cov_observed : the plane-constrained triangulated point (Eqs 12–14), map frame.
+    contrast : brightness step across the line in the left image [gray levels] (``inf`` when unknown).
     """
 
     plane_id: str
@@ -142,6 +153,7 @@ class Candidate:
     reason: str = ""
     P_observed: np.ndarray = field(default_factory=lambda: np.zeros(2), repr=False)
     cov_observed: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)), repr=False)
+    contrast: float = np.inf
 
     @property
     def sigma_s(self) -> float:
@@ -153,10 +165,15 @@ class Candidate:
         return self.z_high - self.z_low
 
 
-def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per row, the outermost region pixel inside columns ``[lo, hi]`` (``outward`` −1: leftmost, +1: rightmost).
+def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int, max_hole: int = 2
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Per row, where the region ends going ``outward`` (−1: left, +1: right) through columns ``[lo, hi]``.
 
-    Returns rows and their boundary columns; rows whose region does not reach into the window are left out.
+    The region's run that starts nearest the window's inner side is followed outward (holes of up to
+    ``max_hole`` px closed: pixels the disparity checks left out) to its end: beyond a gap the region may go
+    on over a wall in line with this one, which is not this wall's edge. Returns rows and their boundary
+    columns; rows whose region does not reach into the window are left out, and so are rows whose run goes
+    through it (it ends beyond the window).
     """
     W = region.shape[1]
     c0 = math.floor(min(max(lo, 0), W - 1))
@@ -164,13 +181,20 @@ def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int) ->
     if c1 < c0:
         return np.zeros(0, int), np.zeros(0)
     sub = region[:, c0 : c1 + 1]
-    has = sub.any(axis=1)
-    rows = np.flatnonzero(has)
     if outward < 0:
-        cols = c0 + np.argmax(sub[rows], axis=1)
-    else:
-        cols = c1 - np.argmax(sub[rows, ::-1], axis=1)
-    return rows, cols.astype(float)
+        sub = sub[:, ::-1]  # index 0 on the inner side
+    rows = np.flatnonzero(sub.any(axis=1))
+    if len(rows) == 0:
+        return rows, np.zeros(0)
+    kernel = np.ones((1, 2 * (max_hole // 2) + 1), np.uint8)
+    run = cv2.morphologyEx(sub[rows].astype(np.uint8), cv2.MORPH_CLOSE, kernel).astype(bool)
+    n = run.shape[1]
+    start = np.argmax(run, axis=1)
+    after = ~run & (np.arange(n)[None, :] > start[:, None])
+    ends = after.any(axis=1)
+    last = np.argmax(after, axis=1) - 1
+    cols = (c1 - last) if outward < 0 else (c0 + last)
+    return rows[ends], cols[ends].astype(float)
 
 
 def robust_rows(cols: np.ndarray, k: float) -> np.ndarray:
@@ -287,10 +311,12 @@ def search_boundary(
     for img in (0, 1):
         outward = -1 if e.u[img] < u_inner[img] else 1
         lo, hi = e.window(img, config.search_sigma)
+        if img == 0:  # the left region exists only inside the plane's predicted window
+            lo, hi = max(lo, pred.window[0]), min(hi, pred.window[1])
         if regions[img] is None:
             rows, cols = np.zeros(0, int), np.zeros(0)
         else:
-            rows, cols = _boundary_columns(regions[img], lo, hi, outward)
+            rows, cols = _boundary_columns(regions[img], lo, hi, outward, int(w // 2))
             keep = robust_rows(cols, config.row_outlier_mad)
             rows, cols = rows[keep], cols[keep]
         if len(rows) < config.min_boundary_rows:
@@ -304,11 +330,14 @@ def search_boundary(
         m, var = minimum_variance_column(cols, lo, hi)
         if img == 0:
             rows_used = len(rows)
-        # A boundary placed inside the outermost segment of the region is moved to that segment.
+        # A boundary placed inside the outermost segment of the region is moved to that segment. Block
+        # matching erodes or fattens a region's border by up to the window, so only segments within one
+        # window beyond it count (farther ones lie on a wall in line with this one, past a gap).
         if len(members_u):
-            outer = members_u[:, img].min() if outward < 0 else members_u[:, img].max()
-            if (outward < 0 and m > outer) or (outward > 0 and m < outer):
-                m, snapped = float(outer), True
+            beyond = (members_u[:, img] - m) * outward
+            near = members_u[(beyond > 0) & (beyond <= w), img]
+            if len(near):
+                m, snapped = float(near.min() if outward < 0 else near.max()), True
         u_b[img] = m
         var_b[img] = var + camera.sigma_img**2
     # The window term is one physical effect seen by both disparity images (the window straddling the
@@ -394,6 +423,8 @@ def select(candidates: list[Candidate], boundaries: list[Boundary], config: Land
                 break
         if not reason and c.length_similarity < config.min_length_similarity:
             reason = REASON_LENGTH
+        if not reason and c.contrast < config.min_contrast:
+            reason = REASON_CONTRAST
         out.append(_replace(c, selected=not reason, reason=reason))
     return out
 
@@ -439,6 +470,10 @@ def landmarks_on_plane(
     edge that was found with the map's length, and features near them are rejected like near a found one.
     """
     members = plane_members(fit, pairs, left_segments, plane_config)
+    # A wall in line with another (two partitions in a row) shares its plane: segments beyond the wall's ends
+    # fit it too. Only those between the two ends' search windows are the wall's.
+    lo, hi = wall_columns(camera, fit, config.search_sigma)
+    members = members & (pairs.u_left >= lo) & (pairs.u_left <= hi)
     idx = np.flatnonzero(members)
     members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
     boundaries = []
@@ -455,6 +490,8 @@ def landmarks_on_plane(
         ):
             continue
         if world_map is not None:
+            if edge_occluded(camera, fit.X, world_map, fit.plane, edge):
+                continue
             step = edge_depth_step(camera, fit.X, world_map, fit.plane, edge, window_px / 2 + 1)
             if abs(step) < config.min_edge_step_sigma * plane_config.sigma_nu(camera):
                 continue
@@ -465,6 +502,8 @@ def landmarks_on_plane(
         return PlaneLandmarks(fit, [], members, [])
     ref = min(boundaries, key=lambda b: b.sigma_along)
     cands = model_features(camera, fit, ref, pairs, idx)
+    step = left_segments.contrast[pairs.left_index] / 4.0  # a Sobel_x response is 4× the step across an edge
+    cands = [_replace(c, contrast=float(step[c.pair])) for c in cands]
     # An end of the wall not found in this frame (not free, out of the searchable part of the image, or
     # without a depth step) is still where the map puts it: the wall's length from the edge that was found.
     # Features near it are near a boundary too.
@@ -479,6 +518,31 @@ def mapped_boundaries(plane, boundaries: list[Boundary], ref: Boundary) -> list[
     found = {b.edge for b in boundaries}
     return [replace(ref, edge=e, P=ref.P + plane.length * ref.inward, inward=-ref.inward)
             for e in ("p1", "p2") if e not in found]
+
+
+def wall_columns(camera: StereoCamera, fit: PlaneFit, search_sigma: float) -> tuple[float, float]:
+    """Left-image columns the wall can occupy: from the outer side of one end's search window to the other's;
+    unbounded beyond an end that is behind the camera."""
+    bounds = []
+    for name, e in fit.prediction.edges.items():
+        if not np.all(np.isfinite(e.u)):
+            continue
+        inner = fit.plane.point_at(np.array([min(0.1, 0.5 * fit.plane.length)]), name)[0]
+        u_in = float(camera.project_columns(fit.X, inner)[0])
+        lo, hi = e.window(0, search_sigma)
+        bounds.append(("lo", lo) if u_in >= e.u[0] else ("hi", hi))
+    lo = min((v for k, v in bounds if k == "lo"), default=-np.inf)
+    hi = max((v for k, v in bounds if k == "hi"), default=np.inf)
+    return float(lo), float(hi)
+
+
+def edge_occluded(camera: StereoCamera, X, world_map: Map, plane, edge: str) -> bool:
+    """Whether another wall of the map stands between the left camera and the wall's end ``edge``: the region
+    then ends at that wall's edge, not at this one's."""
+    ids = [w.id for w in world_map]
+    exclude = [ids.index(plane.id)] if plane.id in ids else []
+    origin = camera.optical_centres(X)[0]
+    return bool(segments_block(origin, plane.edge(edge), world_map.segments(), exclude=exclude)[0])
 
 
 def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, offset_px: float) -> float:

@@ -232,7 +232,7 @@ def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int, p
                         polarity: dict[int, int] | None = None) -> list[int]:
     """Enter candidates as wall landmarks, jointly per boundary: ``Σ = σ_b² 11ᵀ + diag(σ_f²)`` (DESIGN §4).
     Each group ``(ids, values, Σ)`` is appended to ``priors`` when given; ``polarity`` maps a candidate's pair
-    index to its edge's polarity."""
+    index to its edge's polarity along the wall (:func:`wall_polarity`)."""
     polarity = polarity or {}
     ids = []
     groups: dict[tuple[str, str], list] = {}
@@ -337,7 +337,8 @@ def run_online(
                 n_sel = len(sel.selected)
             if ekf.n_landmarks and n_pairs:
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
-                assoc = associate_frame(ekf, pairs, measured, pan, sel, pol)
+                centre = cam_k.optical_centres(ekf.pose)[0]
+                assoc = associate_frame(ekf, pairs, measured, pan, sel, pol, centre)
                 associated = [int(i) for i, _ in assoc]
                 used_pairs = {int(j) for _, j in assoc}
                 chosen = ekf.select_for_update(assoc, pan)
@@ -356,8 +357,9 @@ def run_online(
             else:
                 take = sel.candidates if method == "plane_no_selection" else sel.selected
                 fresh = [c for c in take if c.pair not in used_pairs and not _duplicate(ekf, c)]
-                new_ids = _new_wall_landmarks(ekf, world_map, fresh, k, priors,
-                                              {c.pair: int(pol[c.pair]) for c in fresh})
+                centre = cam_k.optical_centres(ekf.pose)[0]
+                new_ids = _new_wall_landmarks(ekf, world_map, fresh, k, priors, {
+                    c.pair: wall_polarity(int(pol[c.pair]), world_map[c.plane_id], centre) for c in fresh})
                 if truth is not None:
                     for c in sel.candidates:
                         tid = _match_truth(truth, c)
@@ -393,7 +395,7 @@ def run_online(
 
 
 def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, model=None,
-                    polarity: np.ndarray | None = None) -> list[tuple[int, int]]:
+                    polarity: np.ndarray | None = None, centre=None) -> list[tuple[int, int]]:
     """Pairs (landmark id, segment-pair index) for this frame's update.
 
     Wall landmarks are found by the *pattern* of this frame's candidates along each wall (their positions
@@ -401,16 +403,20 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     wall are known to a few mm): :func:`match_along_wall`, kept if jointly compatible. Point landmarks, and
     wall landmarks the pattern leaves unmatched, go through the image-space association with joint
     compatibility and the vertical-extent cost; each such pair is added only if the whole set stays
-    jointly compatible. ``polarity`` (M,): the sign of each pair's brightness step; a landmark never matches
-    an edge of the opposite polarity (a bar's two edges, equally long and a bar's width apart, differ only in it).
+    jointly compatible. ``polarity`` (M,): the sign of each pair's brightness step in the left image, seen from
+    the camera centre ``centre`` (2,); a wall landmark never matches an edge whose step along its wall is the
+    opposite (a bar's two edges, equally long and a bar's width apart, differ only in it).
     """
-    polarity = np.zeros(len(measured), dtype=int) if polarity is None else np.asarray(polarity, dtype=int)
+    if polarity is None or centre is None:
+        polarity, centre = np.zeros(len(measured), dtype=int), np.zeros(2)
+    polarity = np.asarray(polarity, dtype=int)
     in_view = set(ekf.visible(pan))
     walls: list[list[tuple[int, int]]] = []
     if model is not None:
         for plane_model in model.planes:
-            matched = [(i, c) for i, c in match_along_wall(ekf, plane_model.fit.plane, plane_model.candidates,
-                                                           polarity=polarity)
+            plane = plane_model.fit.plane
+            matched = [(i, c) for i, c in match_along_wall(ekf, plane, plane_model.candidates,
+                                                           polarity=wall_polarity(polarity, plane, centre))
                        if i in in_view]
             if matched:
                 walls.append(matched)
@@ -424,7 +430,7 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     rest = [i for i in ekf.landmark_ids if i not in taken_l]
     free = [j for j in range(len(measured)) if j not in taken_p]
     if rest and free:
-        cost = _height_cost(ekf, pairs, pan) + _polarity_cost(ekf, polarity)
+        cost = _height_cost(ekf, pairs, pan) + _polarity_cost(ekf, polarity, centre)
         rows = [ekf.landmark_ids.index(i) for i in rest]
         sub = ekf.associate_joint(measured[free], pan, candidates=rest, extra_cost=cost[np.ix_(rows, free)])
         for i, j in sub:
@@ -435,7 +441,7 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
 
 
 def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
-                     polarity: np.ndarray | None = None) -> list[tuple[int, int]]:
+                     polarity: np.ndarray | None = None, centre=None) -> list[tuple[int, int]]:
     """Match this frame's candidates on ``plane`` with the wall landmarks on it, by their pattern.
 
     Candidates and landmarks are placed along the wall (from ``p1``). The two sets differ by one common
@@ -465,7 +471,7 @@ def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
     inter = np.clip(np.minimum(zh, ch) - np.maximum(zl, cl), 0.0, None)
     shorter = np.maximum(np.minimum(zh - zl, ch - cl), 1e-3)
     same_height = inter / shorter >= 0.5
-    if polarity is not None:  # an edge never matches one of the opposite brightness step
+    if polarity is not None:  # an edge never matches one of the opposite brightness step along the wall
         lp = np.array([[lm.polarity for lm in lms]])
         cp = np.array([[polarity[cd.pair]] for cd in candidates])
         same_height &= (lp * cp) >= 0
@@ -519,11 +525,25 @@ def _height_cost(ekf: JointEKF, pairs, pan: float, weight: float = 9.0) -> np.nd
     return cost
 
 
-def _polarity_cost(ekf: JointEKF, polarity: np.ndarray, cost: float = np.inf) -> np.ndarray:
-    """(n_landmarks, n_pairs): ``cost`` (default: forbidden) where a landmark's and a pair's known polarities
-    differ, else 0."""
-    lp = np.array([ekf.landmark(i).polarity for i in ekf.landmark_ids], dtype=int)
-    return np.where(lp[:, None] * np.asarray(polarity, dtype=int)[None, :] < 0, cost, 0.0)
+def wall_polarity(polarity, plane, centre):
+    """Image polarity (+1: brighter to the right in the left image) → polarity along the wall (+1: brighter
+    towards ``p2``), for a camera centre ``centre`` (2,) [m]. ``p1 → p2`` runs left to right in the image when
+    the camera is on the wall's right side (opposite its normal); from the other face the sign flips. A
+    painted edge keeps its polarity along the wall from both faces of a partition."""
+    side = float(plane.normal @ (np.asarray(centre, dtype=float) - plane.P1))
+    return np.asarray(polarity, dtype=int) * (1 if side < 0 else -1)
+
+
+def _polarity_cost(ekf: JointEKF, polarity: np.ndarray, centre, cost: float = np.inf) -> np.ndarray:
+    """(n_landmarks, n_pairs): ``cost`` (default: forbidden) where a wall landmark's polarity along its wall
+    and a pair's, seen from ``centre``, are known and differ; else 0."""
+    out = np.zeros((ekf.n_landmarks, len(polarity)))
+    for r, i in enumerate(ekf.landmark_ids):
+        lm = ekf.landmark(i)
+        if lm.kind == "wall" and lm.polarity:
+            pair_pol = wall_polarity(polarity, ekf.landmark_plane(i), centre)
+            out[r] = np.where(lm.polarity * pair_pol < 0, cost, 0.0)
+    return out
 
 
 def _duplicate(ekf: JointEKF, c) -> bool:

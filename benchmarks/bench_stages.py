@@ -18,6 +18,7 @@ from threadpoolctl import threadpool_limits
 from stablemarks.bench import lab_pair
 from stablemarks.config import Config
 from stablemarks.landmarks import landmarks_on_plane, model_features, search_boundary, select
+from stablemarks.maps import visible_parts
 from stablemarks.pipeline import run_front_end, valid_columns
 from stablemarks.planes import fit_plane, plane_members, predict_planes
 
@@ -43,18 +44,19 @@ def main() -> None:
     frame, scenario, run, camera = lab_pair()
     X = run.poses[0].as_array()
     cov_X = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
+    world_map = scenario.map  # built once, as the on-line loop holds it
     cv2.setNumThreads(1)
     with threadpool_limits(1):
         front = run_front_end(frame.left, frame.right, config)
         disp, pairs, seg_l = front.disparity, front.kept_pairs, front.left_segments
-        preds = predict_planes(camera, X, cov_X, scenario.map, config.planes)
+        preds = predict_planes(camera, X, cov_X, world_map, config.planes)
         fits = [f for f in (fit_plane(camera, X, disp.left, p, config.planes) for p in preds) if f]
         models = [landmarks_on_plane(camera, f, pairs, seg_l, disp.right, config.landmarks, config.planes,
                                      float(config.sad.block_size), valid_columns(disp)) for f in fits]
 
         def planes():
             return [fit_plane(camera, X, disp.left, p, config.planes)
-                    for p in predict_planes(camera, X, cov_X, scenario.map, config.planes)]
+                    for p in predict_planes(camera, X, cov_X, world_map, config.planes)]
 
         def landmarks():
             cols = valid_columns(disp)
@@ -64,7 +66,10 @@ def main() -> None:
         members_u = [np.stack([pairs.u_left[m.members], pairs.u_right[m.members]], axis=-1) for m in models]
         parts = {
             "planes (stage)": planes,
-            "  predict_planes": lambda: predict_planes(camera, X, cov_X, scenario.map, config.planes),
+            "  predict_planes": lambda: predict_planes(camera, X, cov_X, world_map, config.planes),
+            "    visible_parts": lambda: visible_parts(world_map, camera, X, max_range=config.planes.max_range,
+                                                   margin_px=-config.planes.view_margin_px,
+                                                   planes=world_map.reference_planes),
             "  fit_plane": lambda: [fit_plane(camera, X, disp.left, p, config.planes) for p in preds],
             "landmarks (stage)": landmarks,
             "  valid_columns": lambda: valid_columns(disp),

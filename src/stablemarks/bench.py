@@ -66,6 +66,7 @@ def stage_times(repeats: int = 15) -> dict:
     left, right = frame.left, frame.right
     X = run.poses[0].as_array()
     cov_X = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
+    world_map = scenario.map  # built once, as the on-line loop holds it
     cv2.setNumThreads(1)
     out = {}
     with threadpool_limits(1):
@@ -90,7 +91,7 @@ def stage_times(repeats: int = 15) -> dict:
         kept_pairs = pairs.subset(kept)
 
         def planes():
-            preds = predict_planes(camera, X, cov_X, scenario.map, config.planes)
+            preds = predict_planes(camera, X, cov_X, world_map, config.planes)
             return [fit_plane(camera, X, disp.left, p, config.planes) for p in preds]
 
         fits = planes()
@@ -105,7 +106,7 @@ def stage_times(repeats: int = 15) -> dict:
         out["landmarks"] = median_time(model, repeats)
         cands = [c for m in models for c in m.candidates if c.selected]
         ekf = JointEKF(camera, X, cov_X, config.ekf)
-        ids = ekf.add_landmarks([NewLandmark.wall(scenario.map[c.plane_id], c.s, c.edge) for c in cands],
+        ids = ekf.add_landmarks([NewLandmark.wall(world_map[c.plane_id], c.s, c.edge) for c in cands],
                                 np.diag([c.sigma_s**2 for c in cands]))
         measured = np.stack([kept_pairs.u_left, kept_pairs.u_right], axis=-1)
 

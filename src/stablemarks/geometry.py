@@ -13,6 +13,7 @@ Robot state ``X = (x [m], y [m], theta [rad])``; a vertical line landmark ``L = 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -135,31 +136,45 @@ class StereoCamera:
     def with_pan(self, pan: float) -> StereoCamera:
         return replace(self, pan=float(pan))
 
+    def _frame(self, X) -> tuple[float, float, float, float, float]:
+        """Left optical centre ``(c_x, c_y)`` [m] in the world, camera heading ``psi = theta + pan`` wrapped to
+        ``[-pi, pi)`` [rad] and its ``(cos psi, sin psi)``, as Python floats (per-call cost matters: every
+        projection and triangulation starts here)."""
+        x, y, th = (float(v) for v in X)
+        c_th, s_th = math.cos(th), math.sin(th)
+        psi = (th + self.pan + math.pi) % (2.0 * math.pi) - math.pi
+        cx = x + (c_th * self.mount_x - s_th * self.mount_y)
+        cy = y + (s_th * self.mount_x + c_th * self.mount_y)
+        return cx, cy, psi, math.cos(psi), math.sin(psi)
+
+    def _centre_rate(self, X) -> tuple[float, float]:
+        """``d c_cam / d theta`` (2,): how the left optical centre moves as the robot turns [m/rad]."""
+        th = float(X[2])
+        c_th, s_th = math.cos(th), math.sin(th)
+        return -s_th * self.mount_x - c_th * self.mount_y, c_th * self.mount_x - s_th * self.mount_y
+
     def camera_pose(self, X) -> SE2:
         """``T_world_cam`` in the plane: left optical centre and heading ``theta + pan``."""
-        X = np.asarray(X, dtype=float)
-        c = X[:2] + rot2(X[2]) @ np.array([self.mount_x, self.mount_y])
-        return SE2(float(c[0]), float(c[1]), float(wrap_angle(X[2] + self.pan)))
+        cx, cy, psi, _, _ = self._frame(X)
+        return SE2(cx, cy, psi)
 
     def to_camera(self, X, points) -> tuple[np.ndarray, np.ndarray]:
         """Lateral ``X_c`` (right) and depth ``Z_c`` (forward) of world points ``(..., 2)`` in the left camera [m]."""
-        X = np.asarray(X, dtype=float)
         p = np.asarray(points, dtype=float)
-        cam = self.camera_pose(X)
-        dx = p[..., 0] - cam.x
-        dy = p[..., 1] - cam.y
-        c, s = np.cos(cam.theta), np.sin(cam.theta)
-        Zc = c * dx + s * dy
-        Xc = s * dx - c * dy
-        return Xc, Zc
+        cx, cy, _, c, s = self._frame(X)
+        dx = p[..., 0] - cx
+        dy = p[..., 1] - cy
+        return s * dx - c * dy, c * dx + s * dy
 
     def from_camera(self, X, Xc, Zc) -> np.ndarray:
         """World points ``(..., 2)`` from lateral/depth coordinates in the left camera."""
-        cam = self.camera_pose(X)
-        c, s = np.cos(cam.theta), np.sin(cam.theta)
+        cx, cy, _, c, s = self._frame(X)
         Xc = np.asarray(Xc, dtype=float)
         Zc = np.asarray(Zc, dtype=float)
-        return np.stack([cam.x + c * Zc + s * Xc, cam.y + s * Zc - c * Xc], axis=-1)
+        out = np.empty(np.broadcast(Xc, Zc).shape + (2,))
+        out[..., 0] = cx + c * Zc + s * Xc
+        out[..., 1] = cy + s * Zc - c * Xc
+        return out
 
     # -------------------------------------------------------------- projection
     def project_columns(self, X, points, *, jacobians: bool = False):
@@ -176,51 +191,38 @@ class StereoCamera:
         uv : (..., 2) ``(u_l, u_r)`` [px]; NaN where the point is not in front of the camera
         (``Z_c <= MIN_DEPTH``).
         """
-        X = np.asarray(X, dtype=float)
         p = np.asarray(points, dtype=float)
-        Xc, Zc = self.to_camera(X, p)
-        ok = Zc > MIN_DEPTH
-        Zs = np.where(ok, Zc, np.nan)
-        ul = self.cu + self.f * Xc / Zs
-        ur = ul - self.f * self.baseline / Zs
-        uv = np.stack([ul, ur], axis=-1)
+        cx, cy, _, c, s = self._frame(X)
+        dx = p[..., 0] - cx
+        dy = p[..., 1] - cy
+        Xc = s * dx - c * dy
+        Zc = c * dx + s * dy
+        Zs = np.where(Zc > MIN_DEPTH, Zc, np.nan)
+        uv = np.empty(p.shape)
+        uv[..., 0] = ul = self.cu + self.f * Xc / Zs
+        uv[..., 1] = ul - self.f * self.baseline / Zs
         if not jacobians:
             return uv
-        J_I_X, J_I_p = self._column_jacobians(X, p, Xc, Zs)
-        return uv, J_I_X, J_I_p
-
-    def _column_jacobians(self, X, p, Xc, Zc):
-        cam = self.camera_pose(X)
-        c, s = np.cos(cam.theta), np.sin(cam.theta)
         f, b = self.f, self.baseline
-        # d(Xc, Zc)/d(px, py)
-        dXc_dp = np.array([s, -c])
-        dZc_dp = np.array([c, s])
-        # u_l = cu + f Xc/Zc ; u_r = u_l - f b / Zc
-        dul_dXc = f / Zc
-        dul_dZc = -f * Xc / Zc**2
-        dur_dZc = dul_dZc + f * b / Zc**2
-        J_ul_p = dul_dXc[..., None] * dXc_dp + dul_dZc[..., None] * dZc_dp
-        J_ur_p = dul_dXc[..., None] * dXc_dp + dur_dZc[..., None] * dZc_dp
-        J_I_p = np.stack([J_ul_p, J_ur_p], axis=-2)
-        # Robot pose: the camera centre moves with (x, y) and rotates with theta.
-        # d = p - c_cam; d c_cam/d theta = R'(theta) m ; the heading psi = theta + pan.
-        m = np.array([self.mount_x, self.mount_y])
-        th = X[2]
-        dcam_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m
-        dx = p[..., 0] - cam.x
-        dy = p[..., 1] - cam.y
-        # Xc = s dx - c dy ; Zc = c dx + s dy ; dpsi/dtheta = 1
-        dXc_dth = c * dx + s * dy - (s * dcam_dth[0] - c * dcam_dth[1])
-        dZc_dth = -s * dx + c * dy - (c * dcam_dth[0] + s * dcam_dth[1])
-        J_ul_X = np.concatenate(
-            [-J_ul_p, (dul_dXc * dXc_dth + dul_dZc * dZc_dth)[..., None]], axis=-1
-        )
-        J_ur_X = np.concatenate(
-            [-J_ur_p, (dul_dXc * dXc_dth + dur_dZc * dZc_dth)[..., None]], axis=-1
-        )
-        J_I_X = np.stack([J_ul_X, J_ur_X], axis=-2)
-        return J_I_X, J_I_p
+        # u_l = cu + f Xc/Zc ; u_r = u_l - f b / Zc ; d(Xc, Zc)/d(px, py) = (s, -c), (c, s)
+        dul_dXc = f / Zs
+        dul_dZc = -f * Xc / Zs**2
+        dur_dZc = dul_dZc + f * b / Zs**2
+        J_I_p = np.empty(p.shape[:-1] + (2, 2))
+        J_I_p[..., 0, 0] = dul_dXc * s + dul_dZc * c
+        J_I_p[..., 0, 1] = dul_dXc * -c + dul_dZc * s
+        J_I_p[..., 1, 0] = dul_dXc * s + dur_dZc * c
+        J_I_p[..., 1, 1] = dul_dXc * -c + dur_dZc * s
+        # Robot pose: the camera centre moves with (x, y) and rotates with theta; d psi / d theta = 1.
+        # Xc = s dx - c dy ; Zc = c dx + s dy
+        r0, r1 = self._centre_rate(X)
+        dXc_dth = c * dx + s * dy - (s * r0 - c * r1)
+        dZc_dth = -s * dx + c * dy - (c * r0 + s * r1)
+        J_I_X = np.empty(p.shape[:-1] + (2, 3))
+        J_I_X[..., :2] = -J_I_p
+        J_I_X[..., 0, 2] = dul_dXc * dXc_dth + dul_dZc * dZc_dth
+        J_I_X[..., 1, 2] = dul_dXc * dXc_dth + dur_dZc * dZc_dth
+        return uv, J_I_X, J_I_p
 
     def project_line(self, X, L, *, jacobians: bool = False):
         """Project a vertical line landmark ``L = (x, y, z_low, z_high)`` (Eq 1) into ``(u_l, u_r, v_top, v_bottom)``.
@@ -254,19 +256,18 @@ class StereoCamera:
 
     def _depth_jacobians(self, X, p):
         """``Z_c`` of world points and its Jacobians ``(..., 3)`` w.r.t. X and ``(..., 2)`` w.r.t. p."""
-        X = np.asarray(X, dtype=float)
         p = np.asarray(p, dtype=float)
-        cam = self.camera_pose(X)
-        c, s = np.cos(cam.theta), np.sin(cam.theta)
-        m = np.array([self.mount_x, self.mount_y])
-        th = X[2]
-        dcam_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m
-        dx = p[..., 0] - cam.x
-        dy = p[..., 1] - cam.y
+        cx, cy, _, c, s = self._frame(X)
+        r0, r1 = self._centre_rate(X)
+        dx = p[..., 0] - cx
+        dy = p[..., 1] - cy
         Zc = c * dx + s * dy
-        dZc_dth = -s * dx + c * dy - (c * dcam_dth[0] + s * dcam_dth[1])
-        dZc_dp = np.broadcast_to(np.array([c, s]), p.shape).copy()
-        dZc_dX = np.concatenate([-dZc_dp, np.asarray(dZc_dth)[..., None]], axis=-1)
+        dZc_dp = np.empty(p.shape)
+        dZc_dp[..., 0] = c
+        dZc_dp[..., 1] = s
+        dZc_dX = np.empty(p.shape[:-1] + (3,))
+        dZc_dX[..., :2] = -dZc_dp
+        dZc_dX[..., 2] = -s * dx + c * dy - (c * r0 + s * r1)
         return Zc, dZc_dX, dZc_dp
 
     def disparity(self, X, points, *, jacobians: bool = False):
@@ -326,58 +327,59 @@ class StereoCamera:
         """
         u_l = np.asarray(u_l, dtype=float)
         u_r = np.asarray(u_r, dtype=float)
-        s_img = np.asarray(self.sigma_img if sigma_img is None else sigma_img, dtype=float)
-        var_uv = np.broadcast_to(s_img**2, np.broadcast(u_l, u_r).shape + (2,)) if s_img.ndim else None
         d = u_l - u_r
         d = np.where(d > 0, d, np.nan)
         fb = self.f * self.baseline
         Zc = fb / d
         Xc = (u_l - self.cu) * Zc / self.f
         # d(Xc, Zc)/d(u_l, u_r)
-        dZ_dul = -fb / d**2
         dZ_dur = fb / d**2
+        dZ_dul = -dZ_dur
+        # J (..., 2, 2): d(Xc, Zc)/d(u_l, u_r) in the camera frame, or d(x, y)/d(u_l, u_r) = R_w_c of it
+        # in the world, R_w_c = [[s, c], [-c, s]] (columns: world directions of camera x and z)
+        J = np.empty(d.shape + (2, 2))
         dX_dul = Zc / self.f + (u_l - self.cu) * dZ_dul / self.f
         dX_dur = (u_l - self.cu) * dZ_dur / self.f
-        J_c_u = np.stack([np.stack([dX_dul, dX_dur], -1), np.stack([dZ_dul, dZ_dur], -1)], -2)
-        def propagate(J):
-            if cov_uv is not None:
-                return J @ np.asarray(cov_uv, dtype=float) @ np.swapaxes(J, -1, -2)
-            if var_uv is None:
-                return s_img**2 * J @ np.swapaxes(J, -1, -2)
-            return (J * var_uv[..., None, :]) @ np.swapaxes(J, -1, -2)
-
         if X is None:
-            return np.stack([Xc, Zc], -1), propagate(J_c_u)
-        X = np.asarray(X, dtype=float)
-        cam = self.camera_pose(X)
-        c, s = np.cos(cam.theta), np.sin(cam.theta)
-        R_w_c = np.array([[s, c], [-c, s]])  # columns: world direction of camera x (right) and z (forward)
-        p = self.from_camera(X, Xc, Zc)
-        cov = propagate(R_w_c @ J_c_u)
-        if cov_X is not None:
+            J[..., 0, 0] = dX_dul
+            J[..., 0, 1] = dX_dur
+            J[..., 1, 0] = dZ_dul
+            J[..., 1, 1] = dZ_dur
+            p = np.empty(d.shape + (2,))
+            p[..., 0] = Xc
+            p[..., 1] = Zc
+        else:
+            cx, cy, _, c, s = self._frame(X)
+            J[..., 0, 0] = s * dX_dul + c * dZ_dul
+            J[..., 0, 1] = s * dX_dur + c * dZ_dur
+            J[..., 1, 0] = -c * dX_dul + s * dZ_dul
+            J[..., 1, 1] = -c * dX_dur + s * dZ_dur
+            p = np.empty(d.shape + (2,))
+            p[..., 0] = cx + c * Zc + s * Xc
+            p[..., 1] = cy + s * Zc - c * Xc
+        J_T = np.swapaxes(J, -1, -2)
+        if cov_uv is not None:
+            cov = J @ np.asarray(cov_uv, dtype=float) @ J_T
+        else:
+            s_img = np.asarray(self.sigma_img if sigma_img is None else sigma_img, dtype=float)
+            cov = s_img**2 * J @ J_T if s_img.ndim == 0 else (J * (s_img**2)[..., None, :]) @ J_T
+        if X is not None and cov_X is not None:
             J_p_X = self.triangulation_jacobian_pose(X, Xc, Zc)
             cov = cov + J_p_X @ np.asarray(cov_X, dtype=float) @ np.swapaxes(J_p_X, -1, -2)
         return p, cov
 
     def triangulation_jacobian_pose(self, X, Xc, Zc) -> np.ndarray:
         """``J_p_X`` (..., 2, 3): how a triangulated world point moves with the robot pose."""
-        X = np.asarray(X, dtype=float)
         Xc = np.asarray(Xc, dtype=float)
         Zc = np.asarray(Zc, dtype=float)
-        psi = X[2] + self.pan
-        c, s = np.cos(psi), np.sin(psi)
-        th = X[2]
-        m = np.array([self.mount_x, self.mount_y])
-        dcam_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m
+        _, _, _, c, s = self._frame(X)
+        r0, r1 = self._centre_rate(X)
         # p = cam + Zc (c, s) + Xc (s, -c)
-        dpx_dth = dcam_dth[0] - s * Zc + c * Xc
-        dpy_dth = dcam_dth[1] + c * Zc + s * Xc
-        shape = np.broadcast(Xc, Zc).shape
-        J = np.zeros(shape + (2, 3))
+        J = np.zeros(np.broadcast(Xc, Zc).shape + (2, 3))
         J[..., 0, 0] = 1.0
         J[..., 1, 1] = 1.0
-        J[..., 0, 2] = dpx_dth
-        J[..., 1, 2] = dpy_dth
+        J[..., 0, 2] = r0 - s * Zc + c * Xc
+        J[..., 1, 2] = r1 + c * Zc + s * Xc
         return J
 
     def heights(self, v, Zc) -> np.ndarray:
@@ -407,15 +409,14 @@ class StereoCamera:
 
     def optical_centres(self, X) -> tuple[np.ndarray, np.ndarray]:
         """World ``(x, y)`` of the left and right optical centres for robot pose X."""
-        cam = self.camera_pose(X)
-        right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
-        left_c = cam.translation
-        return left_c, left_c + self.baseline * right
+        cx, cy, _, c, s = self._frame(X)
+        return np.array([cx, cy]), np.array([cx + self.baseline * s, cy - self.baseline * c])
 
     def column_ray(self, X, u) -> np.ndarray:
         """Unit world directions ``(..., 2)`` of the left camera's rays through image columns ``u``."""
-        cam = self.camera_pose(X)
-        c, s = np.cos(cam.theta), np.sin(cam.theta)
+        _, _, _, c, s = self._frame(X)
         xn = (np.asarray(u, dtype=float) - self.cu) / self.f
-        d = np.stack([c + s * xn, s - c * xn], -1)
+        d = np.empty(xn.shape + (2,))
+        d[..., 0] = c + s * xn
+        d[..., 1] = s - c * xn
         return d / np.linalg.norm(d, axis=-1, keepdims=True)

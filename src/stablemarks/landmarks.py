@@ -50,6 +50,9 @@ class LandmarkConfig:
         if not 0.0 <= self.min_length_similarity <= 1.0:
             raise InputError(expected("a number in [0, 1]", self.min_length_similarity,
                                       where="landmarks.min_length_similarity"))
+        if self.filter_boundary_sigma not in ("measured", "model"):
+            raise InputError(expected("'measured' or 'model'", self.filter_boundary_sigma,
+                                      where="landmarks.filter_boundary_sigma"))
         if not (np.isfinite(self.min_contrast) and self.min_contrast >= 0):
             raise InputError(expected("a number of gray levels >= 0", self.min_contrast,
                                       where="landmarks.min_contrast"))
@@ -64,6 +67,11 @@ class LandmarkConfig:
     paper's rejection."""
     min_length_similarity: float = 0.7
     """Reject pairs with ``ℓ_s`` (Eq 18) below this (Sec 4)."""
+    filter_boundary_sigma: str = "model"
+    """Which σ of the boundary enters the filter with the landmarks modelled from it: ``measured`` (the
+    minimum-variance column's spread and the image noise, DESIGN §4) or ``model`` (that plus the SAD window
+    allowance ``w²/12`` that the near-boundary rule uses, which reproduces Table 1's σ but is several times
+    the actual error where the region's border is sharp, making the filter under-confident)."""
     min_contrast: float = 30.0
     """Reject features whose brightness step across the line (the left segment's mean ``|Sobel_x| / 4``) is
     below this many gray levels. Beyond the paper: a textured wall (wood grain, fabric, speckled paint) yields
@@ -95,9 +103,10 @@ class Boundary:
 
     ``u`` (2,) columns in the left and right image [px], ``sigma_u`` (2,) their σ [px], ``P`` (2,) the
     constrained boundary position ``P_b`` in the map frame [m], ``cov`` (2, 2) ``Σ_Pb`` [m²], ``sigma_along``
-    its σ along the wall [m]; ``snapped`` when moved to the outermost member segment; ``rows`` the
-    number of image rows that entered the left search; ``inward`` (2,) the wall's unit direction from
-    this edge into the wall.
+    its σ along the wall [m] (with the SAD window allowance, for the selection rule), ``sigma_along_measured``
+    the same from the rows' spread and the image noise alone; ``snapped`` when moved to the outermost member
+    segment; ``rows`` the number of image rows that entered the left search; ``inward`` (2,) the wall's unit
+    direction from this edge into the wall.
     """
 
     plane_id: str
@@ -110,6 +119,7 @@ class Boundary:
     snapped: bool
     rows: int
     inward: np.ndarray
+    sigma_along_measured: float = np.nan
 
 
 @dataclass(frozen=True)
@@ -130,6 +140,8 @@ class Candidate:
     selected, reason : the selection decision and, when rejected, why (Sec 4).
     P_observed, cov_observed : the plane-constrained triangulated point (Eqs 12–14), map frame.
     contrast : brightness step across the line in the left image [gray levels] (``inf`` when unknown).
+    sigma_b_measured : the boundary's σ along the wall without the SAD window allowance [m] (see
+        :attr:`LandmarkConfig.filter_boundary_sigma`).
     """
 
     plane_id: str
@@ -154,6 +166,7 @@ class Candidate:
     P_observed: np.ndarray = field(default_factory=lambda: np.zeros(2), repr=False)
     cov_observed: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)), repr=False)
     contrast: float = np.inf
+    sigma_b_measured: float = np.nan
 
     @property
     def sigma_s(self) -> float:
@@ -354,7 +367,11 @@ def search_boundary(
     P_hat, cov_hat = fit.fuse_point(P, cov)
     t = _inward(plane, edge)
     sigma_along = float(np.sqrt(t @ cov_hat @ t))
-    return Boundary(plane.id, edge, u_b, sigma_u, P_hat, cov_hat, sigma_along, snapped, rows_used, t)
+    # the same without the window allowance: the rows' spread and the image noise only (DESIGN §4)
+    _, cov_m = camera.triangulate(u_b[0], u_b[1], X, cov_uv=np.diag(var_b))
+    _, cov_m = fit.fuse_point(P, cov_m)
+    sigma_m = float(np.sqrt(t @ cov_m @ t))
+    return Boundary(plane.id, edge, u_b, sigma_u, P_hat, cov_hat, sigma_along, snapped, rows_used, t, sigma_m)
 
 
 def model_features(
@@ -393,7 +410,7 @@ def model_features(
                       var_s[j] * tt,  # Eq 17: rank 1 along the wall
                       float(z_low[j]), float(z_high[j]), float(pairs.length_similarity[i]), float(pairs.u_left[i]),
                       float(pairs.u_right[i]), float(pairs.v_top[i]), float(pairs.v_bottom[i]),
-                      P_observed=P_hat[j], cov_observed=cov_hat[j])
+                      P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured)
         )
     return out
 

@@ -21,6 +21,7 @@ File format (YAML, metres)::
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -268,23 +269,22 @@ def load_map(path: str | Path) -> Map:
 
 # ------------------------------------------------------------- visibility
 def _crossings(origins, rays, walls, exclude: Sequence[int] = ()):
-    """Ray/wall intersections: ``lam`` (N, K) along ``rays`` (N, 2) from ``origins`` and ``mu`` (N, K) along
-    each kept wall of ``walls`` (K, 2, 2) from its first end, NaN/inf where parallel."""
+    """Ray/wall intersections: ``lam`` (N, K) along ``rays`` (N, 2) from ``origins`` ((N, 2) or one (2,)) to
+    each kept wall of ``walls`` (K, 2, 2), NaN where a ray misses the wall or runs parallel to it."""
     o = np.asarray(origins, dtype=float).reshape(-1, 2)
     r = np.asarray(rays, dtype=float).reshape(-1, 2)
-    o = np.broadcast_to(o, r.shape)
     walls = np.asarray(walls, dtype=float).reshape(-1, 2, 2)
-    keep = np.ones(len(walls), dtype=bool)
-    keep[list(exclude)] = False
-    walls = walls[keep]
-    a = walls[None, :, 0, :]  # (1,K,2)
-    s = (walls[:, 1, :] - walls[:, 0, :])[None]  # (1,K,2)
-    r = r[:, None, :]  # (N,1,2)
-    denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]
-    qp = a - o[:, None, :]
+    if len(exclude):
+        walls = np.delete(walls, list(exclude), axis=0)
+    a = walls[:, 0, :]  # (K, 2)
+    s = walls[:, 1, :] - a
+    r0, r1 = r[:, 0:1], r[:, 1:2]  # (N, 1)
+    denom = r0 * s[:, 1] - r1 * s[:, 0]  # (N, K)
+    qx = a[:, 0] - o[:, 0:1]  # (N or 1, K)
+    qy = a[:, 1] - o[:, 1:2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        lam = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
-        mu = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
+        lam = (qx * s[:, 1] - qy * s[:, 0]) / denom
+        mu = (qx * r1 - qy * r0) / denom
     ok = (np.abs(denom) > 1e-12) & (mu >= 0) & (mu <= 1)
     return np.where(ok, lam, np.nan)
 
@@ -297,10 +297,13 @@ def segments_block(origins, targets, walls, exclude: Sequence[int] = ()) -> np.n
     """
     o = np.asarray(origins, dtype=float).reshape(-1, 2)
     t = np.asarray(targets, dtype=float).reshape(-1, 2)
-    o = np.broadcast_to(o, t.shape)
     if len(t) == 0 or len(np.asarray(walls).reshape(-1, 4)) == len(exclude):
         return np.zeros(len(t), dtype=bool)
-    lam = _crossings(o, t - o, walls, exclude)
+    return _blocked(_crossings(o, t - o, walls, exclude))
+
+
+def _blocked(lam: np.ndarray) -> np.ndarray:
+    """(N,) whether sight lines cross a wall strictly between their ends, from :func:`_crossings` (N, K)."""
     with np.errstate(invalid="ignore"):
         return ((lam > 1e-9) & (lam < 1 - 1e-6)).any(axis=1)
 
@@ -336,44 +339,100 @@ def visible_parts(
     X,
     *,
     max_range: float = 12.0,
-    step: float = 0.02,
     margin_px: float = 0.0,
+    edge_tol: float = 0.02,
     planes: Iterable[ReferencePlane] | None = None,
 ) -> list[VisiblePart]:
     """Which walls, and which parts of each, the left camera sees from robot pose ``X``.
 
     A point of a wall is visible when it projects inside the left image (with ``margin_px`` to spare),
-    lies within ``max_range`` [m] in front of the camera, the wall faces the camera, and no other wall of
-    the map blocks the sight line. Walls are sampled every ``step`` [m]; walls with nothing visible are
-    left out. A free edge counts as visible when the wall is visible within one step of it.
+    lies within ``max_range`` [m] in front of the camera (depth above 5 cm), the wall faces the camera, and
+    no other wall of the map blocks the sight line. Walls with nothing visible are left out. A free edge
+    counts as visible when the visible part reaches within ``edge_tol`` [m] of it.
+
+    The intervals are exact: along a wall ``s ↦ P(s)`` every condition changes only where the depth, the
+    range or the image column reach their limits, or where the sight line passes an end of another wall or
+    the point crosses another wall's line. Those break points are computed in closed form, for all walls at
+    once, and each piece between two is tested at its middle; the wall's ends are tested too (an end
+    touching another wall may be all that is seen of a wall: a zero-length interval).
     """
-    cam = camera
-    centre, _ = cam.optical_centres(X)
-    walls = world_map.segments()
+    centre, _ = camera.optical_centres(X)
     index = {p.id: i for i, p in enumerate(world_map.planes)}
+    targets = [p for p in (planes if planes is not None else world_map.planes) if p.faces(centre)]
+    if not targets:
+        return []
+    walls = world_map.segments()  # (K, 2, 2)
+    own = np.array([index[p.id] for p in targets])
+    P1 = walls[own, 0]  # (T, 2)
+    length = np.array([p.length for p in targets])
+    t = (walls[own, 1] - P1) / length[:, None]
+    q = P1 - centre
+    psi = camera.camera_pose(X).theta
+    c, s = math.cos(psi), math.sin(psi)
+    # linear limits g·(q + s t) = k: depth Z_c = 0.05 m and the image sides f X_c = (u − cu) Z_c
+    sides = np.array([-0.5 + margin_px, camera.width - 0.5 - margin_px])[:, None] - camera.cu
+    g = np.concatenate([[[c, s]], camera.f * np.array([[s, -c]]) - sides * np.array([[c, s]])])  # (3, 2)
+    k = np.array([_MIN_DEPTH_VISIBLE, 0.0, 0.0])
+    qt = (q * t).sum(-1)[:, None]
+    tips = walls.reshape(-1, 2) - centre  # sight lines through the walls' ends
+    e = walls[:, 1] - walls[:, 0]  # crossings with the walls' lines
+    with np.errstate(divide="ignore", invalid="ignore"):
+        b = np.concatenate([
+            np.zeros_like(qt),
+            (k - q @ g.T) / (t @ g.T),
+            -qt + np.sqrt(qt**2 - (q * q).sum(-1)[:, None] + max_range**2) * np.array([-1.0, 1.0]),  # range
+            _cross(q[:, None, :], tips[None]) / _cross(tips[None], t[:, None, :]),
+            _cross(walls[None, :, 0] - P1[:, None], e[None]) / _cross(t[:, None, :], e[None]),
+        ], axis=1)  # fmt: skip
+    L = length[:, None]
+    b = np.where((b > 0) & (b < L), b, L)
+    b[:, 0] = 0.0
+    b.sort(axis=1)
+    # the wall's start on its own (an end touching another wall may be all that is seen of a wall), the
+    # pieces between break points (some of zero length: skipped), the wall's end on its own
+    lo = np.concatenate([np.zeros_like(L), b[:, :-1], L], axis=1)
+    hi = np.concatenate([np.zeros_like(L), b[:, 1:], L], axis=1)
+    test = hi > lo
+    test[:, [0, -1]] = True
+    row, col = np.nonzero(test)
+    mid = 0.5 * (lo[row, col] + hi[row, col])
+    pts = P1[row] + mid[:, None] * t[row]
+    Xc, Zc = camera.to_camera(X, pts)
+    uv = camera.project_columns(X, pts)
+    ok = (Zc > _MIN_DEPTH_VISIBLE) & (np.hypot(Xc, Zc) <= max_range) & camera.in_image(uv[:, 0], margin_px)
+    if ok.any():
+        lam = _crossings(centre, pts[ok] - centre, walls)
+        lam[np.arange(len(lam)), own[row[ok]]] = np.nan  # a wall does not hide itself
+        ok[ok] = ~_blocked(lam)
+    seen = np.zeros(test.shape, dtype=bool)
+    seen[row, col] = ok
     out: list[VisiblePart] = []
-    for plane in planes if planes is not None else world_map.planes:
-        if not plane.faces(centre):
+    for plane, lo_i, hi_i, test_i, seen_i in zip(targets, lo.tolist(), hi.tolist(), test.tolist(), seen.tolist(),
+                                                strict=True):
+        intervals: list[list[float]] = []
+        run = False
+        for a, z, tested, v in zip(lo_i, hi_i, test_i, seen_i, strict=True):
+            if not tested:
+                continue
+            if v and run:
+                intervals[-1][1] = z
+            elif v:
+                intervals.append([a, z])
+            run = v
+        if not intervals:
             continue
-        n = max(2, int(np.ceil(plane.length / step)) + 1)
-        s = np.linspace(0.0, plane.length, n)
-        pts = plane.point_at(s)
-        Xc, Zc = cam.to_camera(X, pts)
-        uv = cam.project_columns(X, pts)
-        ok = (Zc > 0.05) & (np.hypot(Xc, Zc) <= max_range) & cam.in_image(uv[:, 0], margin_px)
-        if ok.any():
-            ok[ok] &= ~segments_block(centre, pts[ok], walls, exclude=[index[plane.id]])
-        if not ok.any():
-            continue
-        intervals = _runs(s, ok)
         free = tuple(
-            e for e in plane.free_edges if any(abs((0.0 if e == "p1" else plane.length) - v) <= step * 1.01
-                                               for iv in intervals for v in iv)
+            e for e in plane.free_edges
+            if any(abs((0.0 if e == "p1" else plane.length) - v) <= edge_tol for iv in intervals for v in iv)
         )
-        out.append(VisiblePart(plane, intervals, free))
+        out.append(VisiblePart(plane, tuple((a, z) for a, z in intervals), free))
     return out
 
 
-def _runs(s: np.ndarray, ok: np.ndarray) -> tuple[tuple[float, float], ...]:
-    idx = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
-    return tuple((float(s[a]), float(s[b - 1])) for a, b in zip(idx[::2], idx[1::2], strict=True))
+_MIN_DEPTH_VISIBLE = 0.05
+"""Wall points nearer than this in front of the camera [m] are not visible."""
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """z component of the cross product of 2-D vectors ``(..., 2)``."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]

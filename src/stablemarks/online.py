@@ -229,10 +229,11 @@ def _match_truth(truth, c, tol_px: float = 2.0) -> str | None:
 
 
 def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int, priors: list | None = None,
-                        polarity: dict[int, int] | None = None) -> list[int]:
+                        polarity: dict[int, int] | None = None, boundary_sigma: str = "model") -> list[int]:
     """Enter candidates as wall landmarks, jointly per boundary: ``Σ = σ_b² 11ᵀ + diag(σ_f²)`` (DESIGN §4).
     Each group ``(ids, values, Σ)`` is appended to ``priors`` when given; ``polarity`` maps a candidate's pair
-    index to its edge's polarity along the wall (:func:`wall_polarity`)."""
+    index to its edge's polarity along the wall (:func:`wall_polarity`). ``boundary_sigma``: which σ_b
+    (``landmarks.filter_boundary_sigma``)."""
     polarity = polarity or {}
     ids = []
     groups: dict[tuple[str, str], list] = {}
@@ -241,6 +242,8 @@ def _new_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int, p
     for (plane_id, edge), group in groups.items():
         plane = world_map[plane_id]
         sb = group[0].sigma_b
+        if boundary_sigma == "measured" and np.isfinite(group[0].sigma_b_measured):
+            sb = group[0].sigma_b_measured
         sf = np.array([c.sigma_f for c in group])
         cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
         new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
@@ -359,7 +362,8 @@ def run_online(
                 fresh = [c for c in take if c.pair not in used_pairs and not _duplicate(ekf, c)]
                 centre = cam_k.optical_centres(ekf.pose)[0]
                 new_ids = _new_wall_landmarks(ekf, world_map, fresh, k, priors, {
-                    c.pair: wall_polarity(int(pol[c.pair]), world_map[c.plane_id], centre) for c in fresh})
+                    c.pair: wall_polarity(int(pol[c.pair]), world_map[c.plane_id], centre) for c in fresh},
+                    config.landmarks.filter_boundary_sigma)
                 if truth is not None:
                     for c in sel.candidates:
                         tid = _match_truth(truth, c)

@@ -131,6 +131,7 @@ def select_landmarks(
     if not preds:
         warnings.append("no reference plane of the map is in view of the pose prior")
     pairs = front.kept_pairs
+    columns = valid_columns(front.disparity)
     fits, models = [], []
     t_fit = t_model = 0.0
     for pred in preds:
@@ -147,7 +148,7 @@ def select_landmarks(
             continue
         model = landmarks_on_plane(camera, fit, pairs, front.left_segments, front.disparity.right,
                                    config.landmarks, config.planes, float(config.sad.block_size),
-                                   valid_columns(front.disparity), world_map)
+                                   columns, world_map)
         t_model += time.perf_counter() - tb
         if fit.plane.free_edges and not model.boundaries:
             warnings.append(f"plane {fit.plane.label!r}: no free edge found in view; its features are not modelled")

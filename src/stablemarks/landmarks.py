@@ -380,8 +380,10 @@ def model_features(
     boundary: Boundary,
     pairs,
     member_idx: np.ndarray,
+    contrast: np.ndarray | None = None,
 ) -> list[Candidate]:
-    """Relative model of the plane's member pairs w.r.t. the boundary (Eqs 12–17), ranked from the edge."""
+    """Relative model of the plane's member pairs w.r.t. the boundary (Eqs 12–17), ranked from the edge.
+    ``contrast`` (M,): each pair's brightness step [gray levels] (Candidate.contrast; unknown: inf)."""
     plane = fit.plane
     X = fit.X
     edge = boundary.edge
@@ -410,7 +412,8 @@ def model_features(
                       var_s[j] * tt,  # Eq 17: rank 1 along the wall
                       float(z_low[j]), float(z_high[j]), float(pairs.length_similarity[i]), float(pairs.u_left[i]),
                       float(pairs.u_right[i]), float(pairs.v_top[i]), float(pairs.v_bottom[i]),
-                      P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured)
+                      P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured,
+                      contrast=np.inf if contrast is None else float(contrast[i]))
         )
     return out
 
@@ -518,9 +521,8 @@ def landmarks_on_plane(
     if not boundaries:
         return PlaneLandmarks(fit, [], members, [])
     ref = min(boundaries, key=lambda b: b.sigma_along)
-    cands = model_features(camera, fit, ref, pairs, idx)
     step = left_segments.contrast[pairs.left_index] / 4.0  # a Sobel_x response is 4× the step across an edge
-    cands = [_replace(c, contrast=float(step[c.pair])) for c in cands]
+    cands = model_features(camera, fit, ref, pairs, idx, step)
     # An end of the wall not found in this frame (not free, out of the searchable part of the image, or
     # without a depth step) is still where the map puts it: the wall's length from the edge that was found.
     # Features near it are near a boundary too.

@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 from numba import njit
 
@@ -199,9 +198,14 @@ def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int, ma
     rows = np.flatnonzero(sub.any(axis=1))
     if len(rows) == 0:
         return rows, np.zeros(0)
-    kernel = np.ones((1, 2 * (max_hole // 2) + 1), np.uint8)
-    run = cv2.morphologyEx(sub[rows].astype(np.uint8), cv2.MORPH_CLOSE, kernel).astype(bool)
+    run = sub[rows]
     n = run.shape[1]
+    # fill holes of up to max_hole px between region pixels: the last region column at or before each column
+    # and the next one at or after it
+    cols_idx = np.arange(n)
+    prev = np.maximum.accumulate(np.where(run, cols_idx, -1), axis=1)
+    nxt = np.minimum.accumulate(np.where(run, cols_idx, n)[:, ::-1], axis=1)[:, ::-1]
+    run = run | ((prev >= 0) & (nxt < n) & (nxt - prev - 1 <= max_hole))
     start = np.argmax(run, axis=1)
     after = ~run & (np.arange(n)[None, :] > start[:, None])
     ends = after.any(axis=1)

@@ -16,6 +16,7 @@ shared, so ratios to a reference measured in the same run are the figures to rea
 
 from __future__ import annotations
 
+import pickle
 import statistics
 import time
 import tracemalloc
@@ -194,36 +195,59 @@ def ekf_vs_filterpy(sizes=(10, 100, 500, 1000, 2000), m: int = 6, repeats: int =
     return out
 
 
-def memory_profile(frames: int = 200, scenario: str = "loop") -> dict:
-    """Peak traced memory of each frame of the on-line loop on a simulated scenario (at most its length):
-    it must stay flat, growing only with the landmark state."""
-    from .online import SimulatedSource, run_online
+def long_run(scenario: str, frames: int):
+    """The simulated run of ``scenario`` with its path driven again and again until it has at least ``frames``
+    frames (for a path that ends where it starts, like the ``loop``'s)."""
+    import math
+    from dataclasses import replace
+
     from .sim.run import simulate_run
     from .sim.scenario import load_scenario
 
-    run = simulate_run(load_scenario(scenario))
+    sc = load_scenario(scenario)
+    run = simulate_run(sc)
+    if frames > len(run) and sc.robot.path:
+        laps = math.ceil(frames / len(run))
+        run = simulate_run(replace(sc, robot=replace(sc.robot, path=sc.robot.path * laps)))
+    return run
+
+
+def memory_profile(frames: int = 200, scenario: str = "loop") -> dict:
+    """Traced memory of each frame of the on-line loop on a simulated scenario, repeated along its path
+    until it has ``frames`` frames (the ``loop`` closes on itself, so its laps continue seamlessly).
+
+    Returns the median per-frame peak in the first and last quarter, the largest peak, the landmark count in
+    both quarters, and the growth of the memory held between frames (``held_kb_per_frame``, a straight-line
+    fit over the second half of the run): the per-frame records the loop returns (``FrameRecord``, for the
+    log) are the only thing that should grow besides the landmark state.
+    """
+    from .online import SimulatedSource, run_online
+
+    run = long_run(scenario, frames)
     n = min(frames, len(run))
 
     class First(SimulatedSource):
         def __len__(self):
             return n
 
-    peaks, sizes = [], []
-    result_holder = {}
+    peaks, held = [], []
 
     def progress(k, total):
-        _, peak = tracemalloc.get_traced_memory()
+        current, peak = tracemalloc.get_traced_memory()
         peaks.append(peak / 1e6)
+        held.append(current / 1e3)
         tracemalloc.reset_peak()
 
     tracemalloc.start()
     try:
-        result_holder["r"] = run_online(First(run), progress=progress)
+        result = run_online(First(run), progress=progress)
+        record_kb = len(pickle.dumps(result.records)) / 1e3 / max(1, n)
     finally:
         tracemalloc.stop()
-    result = result_holder["r"]
     sizes = [r.n_landmarks for r in result.records]
     q = max(1, n // 4)
+    half = np.arange(n // 2, n)
+    slope = float(np.polyfit(half, np.asarray(held)[half], 1)[0]) if len(half) > 2 else float("nan")
     return {
         "scenario": scenario,
         "frames": n,
@@ -233,4 +257,6 @@ def memory_profile(frames: int = 200, scenario: str = "loop") -> dict:
         "peak_mb_max": float(max(peaks)),
         "landmarks_first_quarter": float(np.median(sizes[1:q + 1])),
         "landmarks_last_quarter": float(np.median(sizes[-q:])),
+        "held_kb_per_frame": slope,
+        "record_kb_per_frame": record_kb,
     }

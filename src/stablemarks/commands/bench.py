@@ -19,7 +19,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repeats", type=int, default=15, help="timed runs per stage (median; default 15)")
     p.add_argument("--sizes", default="10,100,500,1000,2000", help="landmark counts of the EKF comparison")
     p.add_argument("--memory-frames", type=int, default=0, metavar="N",
-                   help="also trace memory over the first N frames of the `loop` scenario (default: skip)")
+                   help="also trace memory over N frames of the `loop` scenario, lap after lap (default: skip)")
 
 
 def run(args) -> int:
@@ -71,7 +71,9 @@ def run(args) -> int:
             f"memory over {mem['frames']} frames of `{mem['scenario']}`: traced peak per frame "
             f"{mem['peak_mb_first_quarter']:.1f} MB (first quarter) vs {mem['peak_mb_last_quarter']:.1f} MB "
             f"(last quarter), max {mem['peak_mb_max']:.1f} MB; landmarks {mem['landmarks_first_quarter']:.0f} → "
-            f"{mem['landmarks_last_quarter']:.0f}"
+            f"{mem['landmarks_last_quarter']:.0f}; memory held between frames grows "
+            f"{mem['held_kb_per_frame']:.1f} kB/frame (the per-frame records: "
+            f"{mem['record_kb_per_frame']:.1f} kB/frame)"
         )
     console.print(f"ratio_pipeline_vs_stereobm = {stages['ratio_pipeline_vs_stereobm']:.2f}")
     if args.json:

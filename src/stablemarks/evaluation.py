@@ -615,9 +615,11 @@ def check_goals(summary: dict) -> list[Goal]:
         a = by_method.get("all_segments")
         if a is not None:
             add("ATE / all_segments' ATE", _ratio(s["ate_rmse"], a["ate_rmse"]), "< 1", s["ate_rmse"] < a["ate_rmse"])
-            add("NEES frames inside, minus all_segments'",
-                s["nees_pose_fraction_inside"] - a["nees_pose_fraction_inside"], "> 0",
-                s["nees_pose_fraction_inside"] > a["nees_pose_fraction_inside"])
+            # consistency: how far the mean NEES is from its expected value (3), in either direction, on a log
+            # scale (an under-confident and an over-confident filter can both have few frames inside)
+            off_s = abs(math.log(s["nees_pose_mean"] / 3.0))
+            off_a = abs(math.log(a["nees_pose_mean"] / 3.0))
+            add("|log(NEES / 3)|, minus all_segments'", off_s - off_a, "< 0", off_s < off_a)
     return goals
 
 

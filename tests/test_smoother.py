@@ -123,6 +123,25 @@ def test_without_observations_it_returns_the_odometry_chain_and_its_covariance()
     assert out.landmarks == {} and out.error_final < 1e-15 < out.error_initial
 
 
+def test_a_turn_on_the_spot_with_singular_odometry_covariance():
+    """The odometry model gives a pure turn no sideways error: a singular covariance (the loop's corners)."""
+    from stablemarks.motion import OdometryNoise
+
+    start = np.array([0.0, 0.0, 0.0])
+    ekf = JointEKF(StereoCamera(), start, COV0)
+    records = [_record(0, start)]
+    pose = SE2.from_array(start)
+    for k, U in enumerate([np.array([0.2, 0.0, 0.0]), np.array([0.0, 0.0, np.pi / 18]),
+                           np.array([0.2, 0.0, 0.0])], start=1):
+        cov_U = OdometryNoise().covariance(SE2.from_array(U))
+        ekf.predict(U, cov_U)
+        pose = pose @ SE2.from_array(U)
+        records.append(_record(k, pose.as_array(), odometry=U, cov_odometry=cov_U))
+    assert np.linalg.matrix_rank(records[2].cov_odometry) < 3
+    out = batch_smooth(_result(records, ekf, COV0, start), StereoCamera())
+    np.testing.assert_allclose(out.poses[-1], pose.as_array(), atol=1e-9)
+
+
 def test_correlated_group_prior_is_honoured():
     """Two landmarks entered together (shared boundary error) and one of them measured almost exactly from a
     known pose: the other one moves by the conditional Gaussian, ``v_b + Σ_ba/Σ_aa (s_a − v_a)``, and its

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 COLORS = {"stablemarks": "#1f77b4", "plane_no_selection": "#2ca02c", "all_segments": "#d62728",
-          "dead_reckoning": "#ff7f0e"}
+          "dead_reckoning": "#ff7f0e", "gtsam_batch": "#9467bd"}
 
 
 def _pyplot():
@@ -72,7 +72,7 @@ def reobservation_figure(path: str | Path, summary: dict) -> Path:
     plt = _pyplot()
     fig, axes = _panels(plt, len(summary))
     for ax, (scen, by_method) in zip(axes, summary.items(), strict=True):
-        methods = [m for m in by_method if m != "dead_reckoning"]
+        methods = [m for m in by_method if m not in ("dead_reckoning", "gtsam_batch")]  # no re-observation of their own
         x = np.arange(len(methods))
         sel = [by_method[m]["reobservation_selected"] for m in methods]
         rej = [by_method[m]["reobservation_rejected"] for m in methods]

@@ -9,13 +9,12 @@ functions of largest own time.
 import argparse
 import cProfile
 import pstats
-import time
 
 import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from stablemarks.bench import lab_pair
+from stablemarks.bench import lab_pair, wall_times
 from stablemarks.config import Config
 from stablemarks.landmarks import landmarks_on_plane, model_features, search_boundary, select
 from stablemarks.maps import visible_parts
@@ -25,13 +24,7 @@ from stablemarks.planes import fit_plane, plane_members, predict_planes
 
 def times(fn, repeats: int) -> tuple[float, float]:
     """Median and minimum wall time of ``fn()`` [ms] after two warm-up calls."""
-    fn()
-    fn()
-    out = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        out.append(time.perf_counter() - t0)
+    out = wall_times(fn, repeats, warmup=2)
     return 1000 * float(np.median(out)), 1000 * float(np.min(out))
 
 

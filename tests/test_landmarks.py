@@ -232,3 +232,19 @@ def test_an_edge_without_a_depth_step_is_not_searched():
                                valid_columns=valid_columns(res.front.disparity))
     (far,) = [b for b in blind.boundaries if b.edge == "p2"]
     assert abs(far.P[0] - (-1.46)) > 3 * far.sigma_along
+
+
+def test_measured_boundary_sigma_only_on_request(lab_scenario, lab_sim, lab_first_frame):
+    """``filter_boundary_sigma: measured`` gives each candidate the boundary's σ without the window term (smaller
+    than the selection's σ_b); by default it is not computed."""
+    from stablemarks.config import Config
+
+    cam = lab_scenario.camera.with_pan(lab_sim.pans[0])
+    X0 = lab_sim.poses[0].as_array()
+    args = (lab_first_frame.left, lab_first_frame.right, cam, lab_scenario.map, X0, COV_PRIOR)
+    default = process_frame(*args)
+    assert default.candidates and all(np.isnan(c.sigma_b_measured) for c in default.candidates)
+    measured = process_frame(*args, Config().with_overrides({"landmarks": {"filter_boundary_sigma": "measured"}}))
+    assert all(0.0 < c.sigma_b_measured < c.sigma_b for c in measured.candidates)
+    # the selection itself does not change
+    assert [c.selected for c in measured.candidates] == [c.selected for c in default.candidates]

@@ -27,8 +27,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 
-def median_time(fn: Callable[[], object], repeats: int = 15, warmup: int = 2) -> float:
-    """Median wall time of ``fn()`` [s] over ``repeats`` runs after ``warmup`` runs."""
+def wall_times(fn: Callable[[], object], repeats: int = 15, warmup: int = 2) -> list[float]:
+    """Wall times of ``fn()`` [s] over ``repeats`` runs after ``warmup`` runs."""
     for _ in range(warmup):
         fn()
     times = []
@@ -36,7 +36,12 @@ def median_time(fn: Callable[[], object], repeats: int = 15, warmup: int = 2) ->
         t0 = time.perf_counter()
         fn()
         times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return times
+
+
+def median_time(fn: Callable[[], object], repeats: int = 15, warmup: int = 2) -> float:
+    """Median wall time of ``fn()`` [s] over ``repeats`` runs after ``warmup`` runs."""
+    return statistics.median(wall_times(fn, repeats, warmup))
 
 
 def lab_pair(seed: int = 1):

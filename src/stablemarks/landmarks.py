@@ -103,7 +103,8 @@ class Boundary:
     ``u`` (2,) columns in the left and right image [px], ``sigma_u`` (2,) their σ [px], ``P`` (2,) the
     constrained boundary position ``P_b`` in the map frame [m], ``cov`` (2, 2) ``Σ_Pb`` [m²], ``sigma_along``
     its σ along the wall [m] (with the SAD window allowance, for the selection rule), ``sigma_along_measured``
-    the same from the rows' spread and the image noise alone; ``snapped`` when moved to the outermost member
+    the same from the rows' spread and the image noise alone (computed only when
+    ``landmarks.filter_boundary_sigma`` is ``measured``, else NaN); ``snapped`` when moved to the outermost member
     segment; ``rows`` the number of image rows that entered the left search; ``inward`` (2,) the wall's unit
     direction from this edge into the wall.
     """
@@ -314,8 +315,7 @@ def search_boundary(
     e = pred.edges[edge]
     X = fit.X
     # Which way is "outward" in each image: from a point inside the wall towards the edge.
-    inner = plane.point_at(np.array([min(0.3, 0.5 * plane.length)]), edge)[0]
-    u_inner = camera.project_columns(X, inner)
+    u_inner = _inner_columns(camera, X, plane, edge)
     u_b = np.zeros(2)
     var_b = np.zeros(2)
     rows_used = 0
@@ -371,10 +371,12 @@ def search_boundary(
     P_hat, cov_hat = fit.fuse_point(P, cov)
     t = _inward(plane, edge)
     sigma_along = float(np.sqrt(t @ cov_hat @ t))
-    # the same without the window allowance: the rows' spread and the image noise only (DESIGN §4)
-    _, cov_m = camera.triangulate(u_b[0], u_b[1], X, cov_uv=np.diag(var_b))
-    _, cov_m = fit.fuse_point(P, cov_m)
-    sigma_m = float(np.sqrt(t @ cov_m @ t))
+    sigma_m = np.nan
+    if config.filter_boundary_sigma == "measured":
+        # the same without the window allowance: the rows' spread and the image noise only (DESIGN §4)
+        _, cov_m = camera.triangulate(u_b[0], u_b[1], X, cov_uv=np.diag(var_b))
+        _, cov_m = fit.fuse_point(P, cov_m)
+        sigma_m = float(np.sqrt(t @ cov_m @ t))
     return Boundary(plane.id, edge, u_b, sigma_u, P_hat, cov_hat, sigma_along, snapped, rows_used, t, sigma_m)
 
 
@@ -546,26 +548,36 @@ def mapped_boundaries(plane, boundaries: list[Boundary], ref: Boundary) -> list[
 def wall_columns(camera: StereoCamera, fit: PlaneFit, search_sigma: float) -> tuple[float, float]:
     """Left-image columns the wall can occupy: from the outer side of one end's search window to the other's;
     unbounded beyond an end that is behind the camera."""
-    bounds = []
+    lo, hi = -np.inf, np.inf
     for name, e in fit.prediction.edges.items():
         if not np.all(np.isfinite(e.u)):
             continue
-        inner = fit.plane.point_at(np.array([min(0.1, 0.5 * fit.plane.length)]), name)[0]
-        u_in = float(camera.project_columns(fit.X, inner)[0])
-        lo, hi = e.window(0, search_sigma)
-        bounds.append(("lo", lo) if u_in >= e.u[0] else ("hi", hi))
-    lo = min((v for k, v in bounds if k == "lo"), default=-np.inf)
-    hi = max((v for k, v in bounds if k == "hi"), default=np.inf)
+        w_lo, w_hi = e.window(0, search_sigma)
+        if _inner_columns(camera, fit.X, fit.plane, name, 0.1)[0] >= e.u[0]:  # the wall lies right of this end
+            lo = w_lo if lo == -np.inf else min(lo, w_lo)
+        else:
+            hi = w_hi if hi == np.inf else max(hi, w_hi)
     return float(lo), float(hi)
+
+
+def _inner_columns(camera: StereoCamera, X, plane, edge: str, depth: float = 0.3) -> np.ndarray:
+    """(2,) image columns of a point ``depth`` metres (at most half the wall) inside the wall from ``edge``:
+    which way the wall lies from its end in each image."""
+    inner = plane.point_at(np.array([min(depth, 0.5 * plane.length)]), edge)[0]
+    return camera.project_columns(X, inner)
+
+
+def _other_walls(world_map: Map, plane) -> tuple[np.ndarray, list[int]]:
+    """The map's walls (K, 2, 2) and the index of ``plane`` among them to leave out (none if not in the map)."""
+    ids = [w.id for w in world_map]
+    return world_map.segments(), ([ids.index(plane.id)] if plane.id in ids else [])
 
 
 def edge_occluded(camera: StereoCamera, X, world_map: Map, plane, edge: str) -> bool:
     """Whether another wall of the map stands between the left camera and the wall's end ``edge``: the region
     then ends at that wall's edge, not at this one's."""
-    ids = [w.id for w in world_map]
-    exclude = [ids.index(plane.id)] if plane.id in ids else []
-    origin = camera.optical_centres(X)[0]
-    return bool(segments_block(origin, plane.edge(edge), world_map.segments(), exclude=exclude)[0])
+    walls, exclude = _other_walls(world_map, plane)
+    return bool(segments_block(camera.optical_centres(X)[0], plane.edge(edge), walls, exclude=exclude)[0])
 
 
 def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, offset_px: float) -> float:
@@ -573,17 +585,16 @@ def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, o
     the wall's own disparity at the edge (from pose ``X``). Positive: something nearer than the wall lies
     beyond the edge; the wall's negated disparity when no wall of the map is hit (open space)."""
     P = plane.edge(edge)
-    inner = plane.point_at(np.array([min(0.3, 0.5 * plane.length)]), edge)[0]
-    u_e, u_i = camera.project_columns(X, np.stack([P, inner]))[:, 0]
+    u_e = float(camera.project_columns(X, P)[0])
+    u_i = float(_inner_columns(camera, X, plane, edge)[0])
     if not np.isfinite(u_e + u_i):
         return 0.0
     u_out = u_e + np.sign(u_e - u_i) * offset_px
     fb = camera.f * camera.baseline
     _, Z_e = camera.to_camera(X, P)
     ray = camera.column_ray(X, u_out)
-    origin = camera.optical_centres(X)[0]
-    ids = [w.id for w in world_map]
-    dist = ray_distances(origin, ray, world_map.segments(), exclude=[ids.index(plane.id)] if plane.id in ids else ())[0]
+    walls, exclude = _other_walls(world_map, plane)
+    dist = ray_distances(camera.optical_centres(X)[0], ray, walls, exclude=exclude)[0]
     cam = camera.camera_pose(X)
     Z_bg = dist * (ray @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
     return float((fb / Z_bg if np.isfinite(Z_bg) and Z_bg > 0 else 0.0) - fb / Z_e)

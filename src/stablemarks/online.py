@@ -347,9 +347,7 @@ def run_online(
                 chosen = ekf.select_for_update(assoc, pan)
                 if chosen:
                     res = ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k)
-                    used = {int(i) for i in res.ids}
-                    measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen
-                                    if int(i) in used]
+                    measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen]
                     observed = [int(i) for i in res.ids]
                     nis = [float(v) for v in res.nis]
             t3 = time.perf_counter()
@@ -445,7 +443,7 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
 
 
 def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
-                     polarity: np.ndarray | None = None, centre=None) -> list[tuple[int, int]]:
+                     polarity: np.ndarray | None = None) -> list[tuple[int, int]]:
     """Match this frame's candidates on ``plane`` with the wall landmarks on it, by their pattern.
 
     Candidates and landmarks are placed along the wall (from ``p1``). The two sets differ by one common

@@ -9,11 +9,11 @@ import pytest
 import yaml
 
 from stablemarks.errors import ConfigError, InputError
-from stablemarks.estimation import JointEKF, NewLandmark
+from stablemarks.estimation import JointEKF, NewLandmark, associate_frame, match_along_wall, wall_polarity
+from stablemarks.estimation import polarity_cost as _polarity_cost
 from stablemarks.geometry import StereoCamera
 from stablemarks.landmarks import Candidate
 from stablemarks.maps import Map, ReferencePlane
-from stablemarks.online import _polarity_cost, associate_frame, match_along_wall, wall_polarity
 from stablemarks.pipeline import run_front_end
 from stablemarks.sim.render import render_stereo
 from stablemarks.sim.scenario import parse_scenario

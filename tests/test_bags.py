@@ -185,7 +185,7 @@ def test_images_are_decoded_on_demand(tmp_path, inputs, monkeypatch):
     assert len(calls) == 2  # opening checks the first pair against the calibration, nothing else
     _, frames = lab_recording()
     source.close()  # reopened when a frame is read again
-    left, _, _ = source.images(2, source.pan(2, None, None))
+    left, _ = source.pair(2)
     np.testing.assert_array_equal(left, frames[2].left)
     assert len(calls) == 4 and "stamped 1700000001.000000000 s" in calls[-2]
     source.close()
@@ -202,16 +202,15 @@ def test_pan_from_joint_states_and_the_mounts_pan_without_a_topic(tmp_path, inpu
     run, _ = lab_recording()
     path = write_bag(tmp_path / "joints", lab_messages(pan="joint"))
     with open_lab_bag(path, inputs, pan_joint="pan") as source:
-        np.testing.assert_allclose([source.pan(k, None, None) for k in range(N_FRAMES)], run.pans[:N_FRAMES],
-                                   atol=1e-12)
+        np.testing.assert_allclose(source.pans, run.pans[:N_FRAMES], atol=1e-12)
     with pytest.raises(SequenceError, match=r"/head/pan: joint states of several joints \(tilt, pan\): pass "
-                                            r"--pan-joint NAME"):
+                                            r"`pan_joint`"):
         open_lab_bag(path, inputs)
     with pytest.raises(SequenceError, match=r"/head/pan: no pan values \(no joint 'yaw'; the joints are pan, tilt\)"):
         open_lab_bag(path, inputs, pan_joint="yaw")
     path = write_bag(tmp_path / "nopan", lab_messages(pan=None))
     with open_lab_bag(path, inputs, pan_topic=None) as source:
-        assert [source.pan(k, None, None) for k in range(N_FRAMES)] == [0.0] * N_FRAMES
+        assert list(source.pans) == [0.0] * N_FRAMES
 
 
 def test_run_on_a_bag_equals_the_run_on_our_folder(tmp_path, inputs):
@@ -234,7 +233,7 @@ def test_frames_outside_the_odometry_are_left_out(tmp_path, inputs):
     with open_lab_bag(path, inputs) as source:
         assert len(source) == 2
         assert source.notes[-1].startswith("2 of 4 frames left out: outside the odometry's time span")
-        np.testing.assert_allclose(source.stamp(0), lab_stamps()[2], atol=1e-6)
+        np.testing.assert_allclose(source.stamps[0], lab_stamps()[2], atol=1e-6)
 
 
 # ------------------------------------------------------------------ decoding
@@ -281,17 +280,17 @@ def test_missing_topic_lists_the_bags_topics(tmp_path, inputs):
         open_lab_bag(path, inputs, left_topic="/camera/left")
     msg = str(err.value)
     assert "\n" not in msg
-    assert msg == (f"{path}: no topic '/camera/left' (--left-topic); the bag has: /head/pan (std_msgs/msg/Float64), "
+    assert msg == (f"{path}: no topic '/camera/left' (`left_topic`); the bag has: /head/pan (std_msgs/msg/Float64), "
                    "/odom (nav_msgs/msg/Odometry), /stereo/left/image_rect (sensor_msgs/msg/Image), "
                    "/stereo/right/image_rect (sensor_msgs/msg/Image)")
-    with pytest.raises(SequenceError, match=re.escape("/odom (--left-topic) is nav_msgs/msg/Odometry, expected "
+    with pytest.raises(SequenceError, match=re.escape("/odom (`left_topic`) is nav_msgs/msg/Odometry, expected "
                                                       "sensor_msgs/msg/Image or sensor_msgs/msg/CompressedImage")):
         open_lab_bag(path, inputs, left_topic=ODOM)
-    with pytest.raises(InputError, match=r"a bag needs --odom-topic TOPIC \(nav_msgs/msg/Odometry\)"):
+    with pytest.raises(InputError, match=r"a bag needs `odom_topic`, a topic of nav_msgs/msg/Odometry"):
         open_lab_bag(path, inputs, odom_topic=None)
-    with pytest.raises(InputError, match=r"carries no calibration: pass --calib DIR"):
+    with pytest.raises(InputError, match=r"carries no calibration: pass `calib`"):
         open_lab_bag(path, inputs, calib=None)
-    with pytest.raises(InputError, match=r"carries no map of walls: pass --map MAP"):
+    with pytest.raises(InputError, match=r"carries no map of walls: pass `map`"):
         open_lab_bag(path, inputs, map=None)
 
 

@@ -173,7 +173,7 @@ def test_kitti_run_from_the_command_line(tmp_path, lab_map):
 def test_kitti_without_odometry_says_it_is_required(tmp_path, lab_map):
     seq = write_kitti(tmp_path, odometry=False)
     with pytest.raises(SequenceError, match=r"07: KITTI has no wheel odometry: put an odometry\.csv "
-                                            r"\(stamp,x,y,theta\) in the folder or pass --odometry CSV"):
+                                            r"\(stamp,x,y,theta\) in the folder or pass `odometry` \(an odometry CSV\)"):
         open_source(seq, map=lab_map)
     write_odometry_csv(tmp_path / "odo.csv", PERIOD * np.arange(N_FRAMES), lab_odometry())
     assert len(open_source(seq, map=lab_map, odometry=tmp_path / "odo.csv")) == N_FRAMES
@@ -276,7 +276,7 @@ def test_euroc_broken_folders(tmp_path, lab_map):
     assert len(open_source(root, map=lab_map, odometry=tmp_path / "odo.csv")) == N_FRAMES
     (tmp_path / "odo.csv").rename(root / "odometry.csv")
     (root / "mount.yaml").unlink()
-    with pytest.raises(InputError, match=r"no camera mount for the EuRoC sequence .*: pass --camera"):
+    with pytest.raises(InputError, match=r"no camera mount for the EuRoC sequence .*: pass `mount`"):
         open_source(root, map=lab_map)
     (root / "mount.yaml").write_text("mount: {height: 1.0}\n")
     sensor = (root / "mav0" / "cam1" / "sensor.yaml").read_text()
@@ -297,4 +297,4 @@ def test_euroc_broken_folders(tmp_path, lab_map):
     source = open_source(root, map=lab_map)  # cam1's first image has no partner: left out
     assert len(source) == N_FRAMES - 1
     assert source.notes == ["0 cam0 and 1 cam1 images have no partner within 5 ms"]
-    np.testing.assert_allclose(source.stamp(0), 1_403_636_580.263555584, atol=1e-6)
+    np.testing.assert_allclose(source.stamps[0], 1_403_636_580.263555584, atol=1e-6)

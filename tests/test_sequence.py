@@ -18,7 +18,8 @@ from stablemarks.cli import main
 from stablemarks.errors import InputError, SequenceError
 from stablemarks.geometry import SE2, StereoCamera, wrap_angle
 from stablemarks.io.calibration import StereoCalibration
-from stablemarks.io.sequence import FRAME_PERIOD, load_sequence, write_sequence, write_simulated_sequence
+from stablemarks.io.sequence import FRAME_PERIOD, load_sequence, write_sequence
+from stablemarks.sim.export import write_simulated_sequence
 from stablemarks.io.trajectory import write_tum
 from stablemarks.maps import Map, ReferencePlane
 from stablemarks.sim import parse_scenario, simulate_run
@@ -286,7 +287,7 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path):
 
 def test_existing_folders_are_replaced_only_when_safe(tmp_path):
     out = write_sequence(tmp_path / "s", **synthetic(n=2, seed=1))
-    with pytest.raises(InputError, match=r"s: folder exists and is not empty \(--force replaces"):
+    with pytest.raises(InputError, match=r"s: folder exists and is not empty \(`force` replaces"):
         write_sequence(out, **synthetic(n=3))
     assert len(load_sequence(out)) == 2
     write_sequence(out, force=True, **synthetic(n=3))

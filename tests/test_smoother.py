@@ -14,24 +14,26 @@ from gtsam.symbol_shorthand import L, X  # noqa: E402
 from stablemarks import evaluation  # noqa: E402
 from stablemarks.config import Config  # noqa: E402
 from stablemarks.errors import InputError  # noqa: E402
-from stablemarks.estimation import EKFConfig, JointEKF, NewLandmark  # noqa: E402
+from stablemarks.estimation import JointEKF, NewLandmark  # noqa: E402
 from stablemarks.evaluation import (  # noqa: E402
     SMOOTHER,
     Trial,
-    TrialSource,
     available_methods,
     check_goals,
     check_methods,
     make_trials,
     run_trials,
+    start_belief,
     summarize,
     truncate_run,
 )
 from stablemarks.geometry import SE2, StereoCamera, wrap_angle  # noqa: E402
+from stablemarks.localizer import FrameRecord  # noqa: E402
 from stablemarks.maps import Map, ReferencePlane  # noqa: E402
 from stablemarks.metrics import ate_rmse  # noqa: E402
-from stablemarks.online import FrameRecord, OnlineResult, run_online  # noqa: E402
+from stablemarks.online import OnlineResult, run_online  # noqa: E402
 from stablemarks.sim.run import simulate_run  # noqa: E402
+from stablemarks.sim.source import SimulatedSource  # noqa: E402
 from stablemarks.smoother import batch_smooth, group_prior_factor, observation_factor  # noqa: E402
 
 from .helpers import numerical_jacobian  # noqa: E402
@@ -42,13 +44,14 @@ COV0 = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
 
 def _record(k, pose, *, odometry=None, cov_odometry=None, pan=0.0, measurements=(), priors=()):
     pose = np.asarray(pose, dtype=float)
-    return FrameRecord(k, 0.5 * k, pan, pose, np.eye(3), pose, None, [], [], [], [], 0, 0, 0, 0, [], {}, [],
-                       odometry, cov_odometry, list(measurements), list(priors))
+    return FrameRecord(index=k, stamp=0.5 * k, pan=pan, pan_command=pan, pose=pose, cov_pose=np.eye(3),
+                       dead_reckoning=pose, odometry=odometry, cov_odometry=cov_odometry,
+                       measurements=list(measurements), landmark_priors=list(priors))
 
 
 def _result(records, ekf, cov0, start):
     records[0] = replace(records[0], dead_reckoning=np.asarray(start, dtype=float))
-    return OnlineResult("fake", "stablemarks", records, ekf, Map((WALL,)), None, {}, {}, cov0)
+    return OnlineResult("fake", "stablemarks", records, ekf, Map((WALL,)), cov0=cov0)
 
 
 # ---------------------------------------------------------------- factors
@@ -152,12 +155,12 @@ def test_correlated_group_prior_is_honoured():
     cov = sigma_b**2 * np.ones((2, 2)) + sigma_f**2 * np.eye(2)
     v = np.array([1.05, 1.4])
     s_a = 1.0
-    camera = StereoCamera()
+    camera = StereoCamera(sigma_img=1e-3)
     ekf = JointEKF(camera, pose, cov0)
     ids = ekf.add_landmarks([NewLandmark.wall(WALL, v[0]), NewLandmark.wall(WALL, v[1])], cov)
     u_l, u_r = camera.project_columns(pose, WALL.point_at(s_a))
     record = _record(0, pose, measurements=[(ids[0], u_l, u_r)], priors=[(ids, list(v), cov)])
-    config = replace(Config(), ekf=EKFConfig(sigma_img=1e-3))
+    config = Config().with_overrides({"noise": {"sigma_img": 1e-3}})
     out = batch_smooth(_result([record], ekf, cov0, pose), camera, config)
     a, b = (out.landmarks[i] for i in ids)
     assert a.s == pytest.approx(s_a, abs=1e-5)
@@ -171,7 +174,7 @@ def test_correlated_group_prior_is_honoured():
 def lab_short(lab_scenario):
     """The full method on the lab's first 11 frames, with the start belief drawn from its covariance."""
     run = truncate_run(simulate_run(lab_scenario, seed=5), 11)
-    result = run_online(TrialSource(run, COV0), cov0=COV0)
+    result = run_online(SimulatedSource(run), start_pose=start_belief(run, COV0), start_cov=COV0)
     return result, batch_smooth(result, lab_scenario.camera)
 
 
@@ -225,9 +228,9 @@ def test_gtsam_batch_is_an_evaluation_method_sharing_the_full_methods_job():
 def test_run_trials_smooths_the_same_stablemarks_run(monkeypatch):
     calls = []
 
-    def counted(source, **kw):
+    def counted(source, localizer=None, **kw):
         calls.append(kw["method"])
-        return run_online(source, **kw)
+        return run_online(source, localizer, **kw)
 
     monkeypatch.setattr(evaluation, "run_online", counted)
     seed = 123

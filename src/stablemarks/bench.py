@@ -226,15 +226,12 @@ def memory_profile(frames: int = 200, scenario: str = "loop") -> dict:
     fit over the second half of the run): the per-frame records the loop returns (``FrameRecord``, for the
     log) are the only thing that should grow besides the landmark state.
     """
-    from .online import SimulatedSource, run_online
+    from .online import run_online
+    from .sim.source import SimulatedSource
 
     run = long_run(scenario, frames)
     n = min(frames, len(run))
-
-    class First(SimulatedSource):
-        def __len__(self):
-            return n
-
+    source = SimulatedSource(run, frames=n)
     peaks, held = [], []
 
     def progress(k, total):
@@ -245,7 +242,7 @@ def memory_profile(frames: int = 200, scenario: str = "loop") -> dict:
 
     tracemalloc.start()
     try:
-        result = run_online(First(run), progress=progress)
+        result = run_online(source, progress=progress)
         record_kb = len(pickle.dumps(result.records)) / 1e3 / max(1, n)
     finally:
         tracemalloc.stop()

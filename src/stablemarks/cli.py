@@ -12,7 +12,7 @@ import pkgutil
 import sys
 
 from . import __version__, commands
-from .errors import StablemarksError
+from .errors import StablemarksError, for_cli
 
 
 def _command_modules():
@@ -39,13 +39,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+FLAGS = {
+    "left_topic": "--left-topic", "right_topic": "--right-topic", "odom_topic": "--odom-topic",
+    "pan_topic": "--pan-topic", "pan_joint": "--pan-joint", "calib": "--calib", "map": "--map", "mount": "--camera",
+    "odometry": "--odometry", "tolerance": "--sync-tolerance", "start_pose": "--pose", "force": "--force",
+    "save_rrd": "--save-rrd",
+}
+"""The library's parameter names (as its error messages write them) → the command line's flags."""
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         code = args._run(args)
     except StablemarksError as exc:
-        print(f"stablemarks {args.command}: error: {exc}", file=sys.stderr)
+        print(f"stablemarks {args.command}: error: {for_cli(str(exc), FLAGS)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"stablemarks {args.command}: interrupted", file=sys.stderr)

@@ -2,8 +2,11 @@
 
 A configuration file holds any subset of the sections below; everything left out keeps its default::
 
+    noise:     {sigma_img: 0.5}                                  # the line-column noise σ_img [px] (Sec 2.3.1)
+    odometry:  {trans_per_m: 0.05, rot_per_m_deg: 2.0, rot_per_rad: 0.05, trans_per_rad: 0.005}
+    pan:       {policy: free_edges, angle_deg: 0.0, limits_deg: [-90, 90]}
     segments:  {gradient_threshold: 40, min_length: 20}
-    matching:  {max_disparity: 64, min_similarity: 0.5}
+    matching:  {min_similarity: 0.5}
     sad:       {block_size: 15, num_disparities: 64, lr_tolerance: 1.0}
     filter:    {tolerance: 1.0, min_support: 0.5}
     planes:    {gate_sigma: 3.0}
@@ -11,6 +14,13 @@ A configuration file holds any subset of the sections below; everything left out
     ekf:       {max_updates_per_frame: 6}
 
 Unknown sections or keys are rejected with a message naming them.
+
+One home for each physical parameter: the line-column noise ``noise.sigma_img`` is read by the plane
+prediction and fit, the boundary search, the feature model and the filter (the camera handed to them
+carries it: :meth:`Config.camera`); the SAD window ``sad.block_size`` and the disparity range
+``sad.min_disparity``/``sad.num_disparities`` are read by the segment matcher, the disparity filter, the
+plane fit and the boundary model; the odometry noise model ``odometry`` by the filter's prediction. The
+settings derived from them (:data:`DERIVED`) cannot be set on their own.
 """
 
 from __future__ import annotations
@@ -18,11 +28,13 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
 
 from .errors import ConfigError, InputError, expected
+from .estimation import EKFConfig
+from .geometry import StereoCamera
 from .landmarks import LandmarkConfig
 from .maps import read_yaml
+from .motion import OdometryNoise, PanConfig
 from .planes import PlaneConfig
 from .vision.area_stereo import SADConfig
 from .vision.segment_stereo import MatchConfig
@@ -38,31 +50,95 @@ class FilterConfig:
     min_support: float = 0.5
     """Fraction of the segment's edge pixels that must agree."""
     search_radius: int = 7
-    """Columns either side of the segment searched for an agreeing disparity [px]: half the SAD window,
-    because an edge at a depth discontinuity takes its disparity from whichever side the window matched
-    (a low-texture plane, like a whiteboard, is matched only some pixels in from its edge)."""
+    """Columns either side of the segment searched for an agreeing disparity [px]: half the SAD window
+    (derived from ``sad.block_size``), because an edge at a depth discontinuity takes its disparity from
+    whichever side the window matched (a low-texture plane, like a whiteboard, is matched only some pixels
+    in from its edge)."""
 
 
-def _ekf_config_type():
-    from .estimation import EKFConfig
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Measurement noise shared by every stage that models uncertainty."""
 
-    return EKFConfig
+    sigma_img: float = 0.5
+    """Standard deviation of a vertical line's column in one image [px] (paper Sec 2.3.1: 0.5 px). Used by
+    the plane prediction gates and fit (Eqs 4–10), the boundary and feature model (Eqs 12–17) and the
+    filter's observation noise (Eq 20)."""
+
+    def __post_init__(self) -> None:
+        v = self.sigma_img
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (v == v and 0 < v < 1e3):
+            raise ConfigError(expected("a positive number of pixels below 1000", v, where="noise.sigma_img"))
+
+
+DERIVED = {
+    ("matching", "min_disparity"): "sad.min_disparity",
+    ("matching", "max_disparity"): "sad.min_disparity + sad.num_disparities",
+    ("filter", "search_radius"): "sad.block_size // 2",
+    ("planes", "correlation_px"): "sad.block_size",
+}
+"""Settings that follow another one (one home for each physical parameter): ``(section, key)`` → its rule."""
 
 
 @dataclass(frozen=True)
 class Config:
-    """Every threshold of the pipeline, grouped by stage."""
+    """Every threshold of the pipeline, grouped by stage (module docstring).
 
+    The settings of :data:`DERIVED` are set from their home in ``__post_init__``: a ``Config`` built
+    with another value for them gets the derived one.
+    """
+
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    odometry: OdometryNoise = field(default_factory=OdometryNoise)
+    pan: PanConfig = field(default_factory=PanConfig)
     segments: SegmentConfig = field(default_factory=SegmentConfig)
     matching: MatchConfig = field(default_factory=MatchConfig)
     sad: SADConfig = field(default_factory=SADConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
     planes: PlaneConfig = field(default_factory=PlaneConfig)
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
-    ekf: Any = field(default_factory=lambda: _ekf_config_type()())
+    ekf: EKFConfig = field(default_factory=EKFConfig)
+
+    def __post_init__(self) -> None:
+        sad = self.sad
+        derived = {
+            "matching": replace(self.matching, min_disparity=float(sad.min_disparity),
+                                max_disparity=float(sad.min_disparity + sad.num_disparities)),
+            "filter": replace(self.filter, search_radius=int(sad.block_size) // 2),
+            "planes": replace(self.planes, correlation_px=float(sad.block_size)),
+        }
+        for name, value in derived.items():
+            if value != getattr(self, name):
+                object.__setattr__(self, name, value)
+
+    def camera(self, camera: StereoCamera) -> StereoCamera:
+        """``camera`` with this configuration's line-column noise ``noise.sigma_img`` (the one home of σ_img:
+        every stage reads it from the camera it is handed)."""
+        if camera.sigma_img == self.noise.sigma_img:
+            return camera
+        return replace(camera, sigma_img=float(self.noise.sigma_img))
+
+    def with_source_defaults(self, defaults: dict) -> Config:
+        """A copy in which the settings a source describes (``{section: {key: value}}``, e.g. a simulated
+        robot's odometry noise and pan policy, or a recording's odometry noise) replace those this
+        configuration leaves at their default; settings chosen otherwise stay."""
+        if not defaults:
+            return self
+        base = Config()
+        keep = {}
+        for section, values in defaults.items():
+            for key, value in values.items():
+                if getattr(getattr(self, section), key) == getattr(getattr(base, section), key):
+                    keep.setdefault(section, {})[key] = value
+        return parse_config(keep, "source defaults", base=self) if keep else self
 
     def to_dict(self) -> dict:
-        return {f.name: dataclasses.asdict(getattr(self, f.name)) for f in fields(self)}
+        """Plain ``{section: {key: value}}`` of every settable key (derived ones left out), loadable again."""
+        def plain(v):
+            return list(v) if isinstance(v, tuple) else v
+
+        return {f.name: {k: plain(v) for k, v in dataclasses.asdict(getattr(self, f.name)).items()
+                         if (f.name, k) not in DERIVED} for f in fields(self)}
 
     def with_overrides(self, overrides: dict, source: str = "config") -> Config:
         """A copy with ``{section: {key: value}}`` applied, validated like a file."""
@@ -87,8 +163,12 @@ def parse_config(data: object, source: str = "config", base: Config | None = Non
         known = {f.name: f for f in fields(current)}
         clean = {}
         for key, value in values.items():
+            if (name, key) in DERIVED:
+                raise ConfigError(f"{source}: {name}.{key}: set from {DERIVED[name, key]} (one home for each "
+                                  "physical parameter); set that instead")
             if key not in known:
-                raise ConfigError(f"{source}: {name}.{key}: unknown setting (known: {', '.join(sorted(known))})")
+                settable = sorted(k for k in known if (name, k) not in DERIVED)
+                raise ConfigError(f"{source}: {name}.{key}: unknown setting (known: {', '.join(settable)})")
             default = getattr(current, key)
             if isinstance(default, bool) and not isinstance(value, bool):
                 raise ConfigError(expected("true or false", value, where=f"{source}: {name}.{key}"))

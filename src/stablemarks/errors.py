@@ -2,6 +2,9 @@
 
 The CLI turns every :class:`StablemarksError` into a one-line message and exit code 1; anything
 else is a bug and keeps its traceback.
+
+Messages name the library's parameters, in backticks (```map```, ```calib```, ```mount```): a script sees the
+keyword argument to pass, and the CLI shows its own flag instead (:func:`for_cli`).
 """
 
 from __future__ import annotations
@@ -47,3 +50,11 @@ def expected(what: str, got: object, *, where: str = "") -> str:
     """
     prefix = f"{where}: " if where else ""
     return f"{prefix}expected {what}, got {got!r}"
+
+
+def for_cli(message: str, flags: dict[str, str]) -> str:
+    """``message`` with each backticked parameter name of ``flags`` replaced by its command-line flag, e.g.
+    ``"pass `map` (our map YAML)"`` → ``"pass --map (our map YAML)"`` with ``{"map": "--map"}``."""
+    for name, flag in flags.items():
+        message = message.replace(f"`{name}`", flag)
+    return message

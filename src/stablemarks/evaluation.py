@@ -11,7 +11,7 @@ as the robot would: when two methods believe different poses they look in slight
 and the images differ only by that pan. One task is one (scenario, trial, method); tasks run in parallel
 through joblib (:func:`evaluate`).
 
-Methods: those of :data:`stablemarks.online.METHODS` and, when the optional ``gtsam`` extra is installed,
+Methods: those of :data:`stablemarks.methods.METHODS` and, when the optional ``gtsam`` extra is installed,
 ``gtsam_batch`` (:data:`SMOOTHER`): the batch smoother of :mod:`stablemarks.smoother` over the ``stablemarks``
 run of the same trial — the same odometry, the same landmark priors and the full method's associations and
 observations — solved by Levenberg–Marquardt: the accuracy reference the full method is compared with. It
@@ -77,9 +77,13 @@ import numpy as np
 from .config import Config
 from .errors import InputError, expected
 from .metrics import along_wall_nees, ate_rmse, chi2_bounds, fraction_inside, pose_nees, position_errors, reobservation
-from .online import METHODS, OnlineResult, SimulatedSource, run_online
+from .frames import Frame
+from .localizer import Estimate, Localizer
+from .methods import METHODS
+from .online import OnlineResult, run_online
 from .sim.run import Run, simulate_run
 from .sim.scenario import Scenario, load_scenario
+from .sim.source import SimulatedSource
 from .smoother import GTSAM_HINT, gtsam_available
 
 SMOOTHER = "gtsam_batch"
@@ -130,9 +134,9 @@ def trial_seeds(base: int, n: int) -> list[int]:
 
 
 def available_methods() -> tuple[str, ...]:
-    """The methods this installation evaluates: :data:`stablemarks.online.METHODS`, then :data:`SMOOTHER`
+    """The methods this installation evaluates: :data:`stablemarks.methods.METHODS`, then :data:`SMOOTHER`
     when gtsam is importable. The default method list of :func:`make_trials`."""
-    return METHODS + ((SMOOTHER,) if gtsam_available() else ())
+    return tuple(METHODS) + ((SMOOTHER,) if gtsam_available() else ())
 
 
 def check_methods(methods: Iterable[str]) -> tuple[str, ...]:
@@ -182,21 +186,77 @@ def truncate_run(run: Run, n: int | None) -> Run:
                    pans=run.pans[:n])
 
 
-class TrialSource(SimulatedSource):
-    """A simulated run whose start belief is drawn from ``N(true start, cov0)`` (seed stream ``(2,)``), and
-    which keeps the ground truth of every image edge (its static attributes) from the first rendered frame."""
+def start_belief(run: Run, cov0) -> np.ndarray:
+    """The filter's start pose of a trial: the true start plus an error drawn from ``N(0, cov0)`` (the run
+    seed's stream ``(2,)``), so that the start belief is a fair sample of its covariance."""
+    rng = np.random.default_rng(np.random.SeedSequence(run.seed, spawn_key=(2,)))
+    return run.poses[0].as_array() + np.linalg.cholesky(cov0) @ rng.standard_normal(3)
 
-    def __init__(self, run: Run, cov0):
-        super().__init__(run)
-        rng = np.random.default_rng(np.random.SeedSequence(run.seed, spawn_key=(2,)))
-        self.start_pose = run.poses[0].as_array() + np.linalg.cholesky(cov0) @ rng.standard_normal(3)
+
+def _match_truth(truth, c, tol_px: float = 2.0) -> str | None:
+    """Id of the true image edge that candidate ``c`` was measured from: on the same wall, within ``tol_px``
+    of the candidate's columns in both images (nearest first), and within max(3σ, 5 cm) of its position."""
+    best, best_d = None, 2.0 * tol_px
+    for e in truth.edges:
+        if e.wall != c.plane_id or not (e.visible_l and e.visible_r):
+            continue
+        du = abs(e.u_l - c.u_left) + abs(e.u_r - c.u_right)
+        if du <= best_d and max(abs(e.u_l - c.u_left), abs(e.u_r - c.u_right)) <= tol_px:
+            best, best_d = e, du
+    if best is None or np.hypot(best.x - c.P[0], best.y - c.P[1]) > max(3.0 * c.sigma_s, 0.05):
+        return None
+    return best.id
+
+
+class TruthObserver:
+    """The evaluation's ground-truth bookkeeping, an observer of :func:`~stablemarks.online.run_online`.
+
+    After every step it records which true feature each new landmark was modelled from (``truth_of``:
+    landmark id → true edge id; a wall landmark by its candidate's image columns, :func:`_match_truth`; a
+    point landmark by the nearest visible true edge within 10 cm), which true features the selection
+    rejected and why (``rejected_truth``), the true features in view in both images per frame
+    (``visible``), and every true edge seen (``edges``: id → :class:`~stablemarks.sim.truth.EdgeTruth`).
+    Frames without truth (recordings) leave it empty.
+    """
+
+    def __init__(self) -> None:
+        self.truth_of: dict[int, str] = {}
+        self.rejected_truth: dict[str, str] = {}
+        self.visible: list[list[str]] = []
         self.edges: dict = {}
 
-    def images(self, k: int, pan: float):
-        left, right, truth = super().images(k, pan)
+    def __call__(self, frame: Frame, est: Estimate, localizer: Localizer) -> None:
+        truth = frame.truth
+        if truth is None:
+            self.visible.append([])
+            return
         if not self.edges:
             self.edges = {e.id: e for e in truth.edges}
-        return left, right, truth
+        if est.model is not None:
+            for c in est.model.candidates:
+                tid = _match_truth(truth, c)
+                if tid is not None and not c.selected:
+                    self.rejected_truth.setdefault(tid, c.reason)
+        for c, i in zip(est.entered.candidates, est.entered.ids, strict=True):
+            tid = _match_truth(truth, c) if c is not None else self._nearest(truth, localizer.ekf.landmark(i).position)
+            if tid is not None:
+                self.truth_of[i] = tid
+        self.visible.append([e.id for e in truth.edges if e.visible_l and e.visible_r])
+
+    @staticmethod
+    def _nearest(truth, position, radius: float = 0.1) -> str | None:
+        best, best_d = None, radius
+        for e in truth.edges:
+            if e.visible_l and e.visible_r:
+                d = float(np.hypot(e.x - position[0], e.y - position[1]))
+                if d < best_d:
+                    best, best_d = e.id, d
+        return best
+
+    def result(self, result: OnlineResult) -> OnlineResult:
+        """``result`` with this observer's ground truth filled in."""
+        return replace(result, truth_of=dict(self.truth_of), rejected_truth=dict(self.rejected_truth),
+                       visible_truth=[list(v) for v in self.visible])
 
 
 def run_trial(trial: Trial) -> dict:
@@ -225,12 +285,16 @@ def run_trials(trials: Sequence[Trial]) -> list[dict]:
                                       f"{t.scenario} seed {t.seed}", where="run_trials"))
     scenario = load_scenario(first.scenario)
     run = truncate_run(simulate_run(scenario, first.seed), first.frames)
-    runs: dict[str, tuple[TrialSource, OnlineResult]] = {}
+    runs: dict[str, tuple[TruthObserver, OnlineResult]] = {}
 
-    def online(method: str) -> tuple[TrialSource, OnlineResult]:
+    def online(method: str) -> tuple[TruthObserver, OnlineResult]:
         if method not in runs:
-            source = TrialSource(run, first.cov0)
-            runs[method] = source, run_online(source, cov0=first.cov0, config=first.config, method=method)
+            source = SimulatedSource(run)
+            truth = TruthObserver()
+            config = first.config.with_source_defaults(source.config_defaults)
+            result = run_online(source, start_pose=start_belief(run, first.cov0), start_cov=first.cov0,
+                                config=config, method=method, observers=[truth])
+            runs[method] = truth, truth.result(result)
         return runs[method]
 
     out = []
@@ -242,7 +306,7 @@ def run_trials(trials: Sequence[Trial]) -> list[dict]:
     return out
 
 
-def _online_measures(trial: Trial, scenario: Scenario, source: TrialSource, result: OnlineResult) -> dict:
+def _online_measures(trial: Trial, scenario: Scenario, source: TruthObserver, result: OnlineResult) -> dict:
     """:func:`run_trial`'s dict for an on-line method's run."""
     stages: dict[str, list[float]] = {}
     for r in result.records:
@@ -256,12 +320,12 @@ def _online_measures(trial: Trial, scenario: Scenario, source: TrialSource, resu
                      stage_times={k: float(np.mean(v)) for k, v in stages.items()})
 
 
-def _smoothed_measures(trial: Trial, scenario: Scenario, source: TrialSource, result: OnlineResult) -> dict:
+def _smoothed_measures(trial: Trial, scenario: Scenario, source: TruthObserver, result: OnlineResult) -> dict:
     """:func:`run_trial`'s dict for :data:`SMOOTHER` over the ``stablemarks`` run ``result``."""
     from .smoother import batch_smooth
 
     start = time.perf_counter()
-    smoothed = batch_smooth(result, source.camera, trial.config)
+    smoothed = batch_smooth(result, scenario.camera, trial.config)
     per_frame = (time.perf_counter() - start) / len(result.records)
     estimates = {lid: (lm.position, lm.cov2d) for lid, lm in smoothed.landmarks.items()}
     out = _measures(trial, scenario, source, result, smoothed.poses, smoothed.cov_poses, estimates, nis=[],
@@ -270,7 +334,7 @@ def _smoothed_measures(trial: Trial, scenario: Scenario, source: TrialSource, re
     return out
 
 
-def _measures(trial: Trial, scenario: Scenario, source: TrialSource, result: OnlineResult, poses, covs,
+def _measures(trial: Trial, scenario: Scenario, source: TruthObserver, result: OnlineResult, poses, covs,
               estimates: dict, *, nis: list[float], time_per_frame: float, stage_times: dict) -> dict:
     """The measures of :func:`run_trial` for poses (K, 3) with covariances (K, 3, 3) and landmark estimates
     ``{id: (position (2,), cov2d (2, 2))}`` over the run ``result`` (its landmarks, truth and records)."""
@@ -329,7 +393,7 @@ def _eligible_features(result, scenario: Scenario, edges: dict, on_plane: set[st
             far.add(tid)
     out = set()
     for r in result.records:
-        vis = set(r.visible_truth)
+        vis = set(result.visible_truth[r.index])
         for tid in far & vis:
             wall = edges[tid].wall
             if any(f"{wall}-{fe}" in vis for fe in scenario.wall(wall).plane.free_edges):

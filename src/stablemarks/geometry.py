@@ -278,11 +278,34 @@ class StereoCamera:
         """
         Zc, dZc_dX, dZc_dp = self._depth_jacobians(X, points)
         Zs = np.where(Zc > MIN_DEPTH, Zc, np.nan)
-        d = self.f * self.baseline / Zs
         if not jacobians:
+            return self.disparity_at_depth(Zs)
+        d, J_d_X = self.disparity_at_depth(Zs, dZc_dX)
+        return d, J_d_X, self.disparity_at_depth(Zs, dZc_dp)[1]
+
+    def disparity_at_depth(self, Zc, J_Z=None):
+        """Disparity of a point at depth ``Zc`` (...,) [m] in front of the left camera (paper Eq 8,
+        ``d = F·2B / c_y`` with ``F = f``, ``2B = baseline``, ``c_y = Zc``) [px].
+
+        With ``J_Z`` (..., k), the Jacobian of the depth with respect to some k parameters (the pose, a point,
+        or — for the plane prediction — the pose at a fixed image column), also returns the disparity's
+        Jacobian ``J_d`` (..., k) = ``−f b / Zc² · J_Z`` (the chain rule of Eq 9).
+        """
+        Zc = np.asarray(Zc, dtype=float)
+        fb = self.f * self.baseline
+        d = fb / Zc
+        if J_Z is None:
             return d
-        dd_dZc = -self.f * self.baseline / Zs**2
-        return d, dd_dZc[..., None] * dZc_dX, dd_dZc[..., None] * dZc_dp
+        return d, (-fb / Zc**2)[..., None] * np.asarray(J_Z, dtype=float)
+
+    def disparity_variance(self, J_d_X, cov_X, sigma_nu=None) -> np.ndarray:
+        """Variance ``σ_d²`` of a predicted disparity (paper Eq 10) [px²]:
+        ``σ_d² = (∂D/∂X) Σ_X (∂D/∂X)ᵀ + σ_ν²`` with ``J_d_X`` (..., 3), ``cov_X`` (3, 3) over
+        ``(x [m], y [m], theta [rad])`` and ``σ_ν`` [px] the disparity pixel noise (default
+        ``sqrt(2)·sigma_img``, Eq 7)."""
+        J = np.asarray(J_d_X, dtype=float)
+        var_nu = 2.0 * self.sigma_img**2 if sigma_nu is None else float(sigma_nu) ** 2
+        return np.einsum("...i,ij,...j->...", J, np.asarray(cov_X, dtype=float), J) + var_nu
 
     def cov_columns(self, X, cov_X, points, cov_points=None) -> np.ndarray:
         """Covariance ``Σ_I`` (..., 2, 2) of ``(u_l, u_r)`` propagated from the pose and the point.
@@ -299,11 +322,10 @@ class StereoCamera:
     def sigma_disparity(self, X, cov_X, points) -> np.ndarray:
         """Standard deviation ``σ_d`` of the disparity of world points (paper Eq 10) [px].
 
-        ``σ_d² = (∂D/∂X) Σ_X (∂D/∂X)ᵀ + σ_ν²`` with ``σ_ν² = 2 σ_img²`` (Eq 7).
+        ``σ_d² = (∂D/∂X) Σ_X (∂D/∂X)ᵀ + σ_ν²`` with ``σ_ν² = 2 σ_img²`` (Eq 7); see :meth:`disparity_variance`.
         """
         _, J_d_X, _ = self.disparity(X, points, jacobians=True)
-        var = np.einsum("...i,ij,...j->...", J_d_X, np.asarray(cov_X, dtype=float), J_d_X)
-        return np.sqrt(var + 2.0 * self.sigma_img**2)
+        return np.sqrt(self.disparity_variance(J_d_X, cov_X))
 
     # ----------------------------------------------------------- triangulation
     def triangulate(self, u_l, u_r, X=None, cov_X=None, *, sigma_img=None, cov_uv=None):

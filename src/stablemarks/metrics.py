@@ -82,7 +82,8 @@ def fraction_inside(values: np.ndarray, bounds: tuple[float, float]) -> float:
 
 def reobservation(result) -> dict:
     """Per landmark (with a known true feature): frames after its creation where the true feature was
-    visible in both images, and how many of those the landmark was associated in.
+    visible in both images, and how many of those the landmark was associated in. ``result`` is a run with
+    its ground truth (``truth_of``, ``visible_truth``: :class:`stablemarks.evaluation.TruthObserver`).
 
     Returns ``{landmark id: (n_associated, n_visible)}``.
     """
@@ -91,7 +92,7 @@ def reobservation(result) -> dict:
         first = next((r.index for r in result.records if lid in r.new), None)
         if first is None:
             continue
-        vis = [r for r in result.records if r.index > first and tid in r.visible_truth]
+        vis = [r for r in result.records if r.index > first and tid in result.visible_truth[r.index]]
         out[lid] = (sum(lid in r.associated for r in vis), len(vis))
     return out
 
@@ -102,7 +103,7 @@ def reobserved_at(result, frame: int) -> tuple[list[int], list[int]]:
     seen, missed = [], []
     for lid, tid in result.truth_of.items():
         first = next((x.index for x in result.records if lid in x.new), None)
-        if first is None or first >= frame or tid not in r.visible_truth:
+        if first is None or first >= frame or tid not in result.visible_truth[frame]:
             continue
         (seen if lid in r.associated else missed).append(lid)
     return seen, missed

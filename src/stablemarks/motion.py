@@ -220,3 +220,55 @@ def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple
         return float(np.clip(default, lo, hi))
     mid = np.mean(points, axis=0) - centre
     return float(np.clip(wrap_angle(math.atan2(mid[1], mid[0]) - X[2]), lo, hi))
+
+
+PAN_POLICIES = ("fixed", "free_edges")
+"""Pan policies: ``fixed`` holds ``pan.angle_deg``; ``free_edges`` looks at the midpoint of the free edges in
+sight (the paper's, Sec 6: :func:`look_at_free_edges`)."""
+
+
+@dataclass(frozen=True)
+class PanConfig:
+    """Where the stereo head looks: the policy behind :meth:`stablemarks.Localizer.command_pan`.
+
+    Attributes
+    ----------
+    policy : one of :data:`PAN_POLICIES`.
+    angle_deg : the fixed pan, or the pan while no free edge is in sight before any frame [deg].
+    limits_deg : ``[min, max]`` mechanical pan range [deg].
+    """
+
+    policy: str = "free_edges"
+    angle_deg: float = 0.0
+    limits_deg: tuple[float, float] = (-90.0, 90.0)
+
+    def __post_init__(self) -> None:
+        if self.policy not in PAN_POLICIES:
+            raise InputError(expected(f"one of {', '.join(PAN_POLICIES)}", self.policy, where="pan.policy"))
+        if isinstance(self.angle_deg, bool) or not isinstance(self.angle_deg, int | float) or \
+                not math.isfinite(self.angle_deg):
+            raise InputError(expected("a finite angle in degrees", self.angle_deg, where="pan.angle_deg"))
+        lim = self.limits_deg
+        ok = isinstance(lim, list | tuple) and len(lim) == 2 and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and -180 <= v <= 180
+            for v in lim) and lim[0] < lim[1]
+        if not ok:
+            raise InputError(expected("[min, max] in degrees within [-180, 180], min < max", lim,
+                                      where="pan.limits_deg"))
+        object.__setattr__(self, "limits_deg", (float(lim[0]), float(lim[1])))
+
+    @property
+    def limits(self) -> tuple[float, float]:
+        """``(min, max)`` pan [rad]."""
+        return math.radians(self.limits_deg[0]), math.radians(self.limits_deg[1])
+
+
+def choose_pan(config: PanConfig, world_map: Map, camera: StereoCamera, X, previous: float | None = None,
+               limits: tuple[float, float] | None = None) -> float:
+    """The pan [rad] ``config.policy`` chooses for a frame taken at the believed pose ``X`` (3,), given the
+    ``previous`` pan (None before the first frame). ``limits`` (rad) overrides ``config.limits``."""
+    lo, hi = config.limits if limits is None else limits
+    angle = math.radians(config.angle_deg)
+    if config.policy == "fixed":
+        return float(np.clip(angle, lo, hi))
+    return look_at_free_edges(world_map, camera, X, limits=(lo, hi), default=angle if previous is None else previous)

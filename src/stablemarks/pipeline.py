@@ -122,7 +122,12 @@ def select_landmarks(
     cov_X,
     config: Config = Config(),
 ) -> FrameLandmarks:
-    """Planes, members, boundaries, models and selection for one frame (Sec 2.3–4)."""
+    """Planes, members, boundaries, models and selection for one frame (Sec 2.3–4).
+
+    ``camera`` is the head panned as the frame was taken; its line-column noise is the configuration's
+    ``noise.sigma_img`` (:meth:`Config.camera`). ``X`` (3,) and ``cov_X`` (3, 3) are the pose prior in the map.
+    """
+    camera = config.camera(camera)
     X = np.asarray(X, dtype=float)
     cov_X = np.asarray(cov_X, dtype=float)
     t0 = time.perf_counter()

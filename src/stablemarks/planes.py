@@ -215,10 +215,8 @@ def predict_plane(
     if not ok.any():
         return None
     columns, Z, J_Z_X = columns[ok], Z[ok], J_Z_X[ok]
-    fb = camera.f * camera.baseline
-    d = fb / Z
-    J_d_X = (-fb / Z**2)[:, None] * J_Z_X
-    var_d = np.einsum("ki,ij,kj->k", J_d_X, cov_X, J_d_X) + config.sigma_nu(camera) ** 2  # Eq 10
+    d, J_d_X = camera.disparity_at_depth(Z, J_Z_X)  # Eqs 8-9 at fixed columns
+    var_d = camera.disparity_variance(J_d_X, cov_X, config.sigma_nu(camera))  # Eq 10
     z_low, z_high = plane.z
     v_top = camera.cv + camera.f * (camera.mount_height - z_high) / Z
     v_bottom = camera.cv + camera.f * (camera.mount_height - z_low) / Z

@@ -176,7 +176,7 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
     """Smooth a run of the on-line loop (:class:`~stablemarks.online.OnlineResult`) in one batch.
 
     ``camera``: the stereo head of the run (unpanned; each frame's pan is in its record); ``config``: the
-    run's configuration (``config.ekf.sigma_img`` is the observation noise). The start pose prior is
+    run's configuration (``config.noise.sigma_img`` is the observation noise). The start pose prior is
     ``N(records[0].dead_reckoning, result.cov0)``; the initial values are the filter's per-frame poses and
     final landmark values. ``marginals``: also compute the marginal covariances of every pose and landmark.
     Raises :class:`InputError` when gtsam is not installed or the run holds point landmarks.
@@ -187,7 +187,7 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
     records = result.records
     if not records:
         raise InputError(expected("a run of at least one frame", "no records", where="batch_smooth.result"))
-    sigma_img = float(config.ekf.sigma_img)
+    sigma_img = float(config.noise.sigma_img)
     graph = gtsam.NonlinearFactorGraph()
     initial = gtsam.Values()
     start = records[0].dead_reckoning

@@ -76,3 +76,35 @@ def make_console():
     from rich.console import Console
 
     return Console(width=None if sys.stdout.isatty() else 160)
+
+
+def parse_overrides(items: list[str]) -> dict:
+    """``["ekf.max_updates_per_frame=4", …]`` → ``{"ekf": {"max_updates_per_frame": 4}}`` (values read as YAML)."""
+    import yaml
+
+    out: dict = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        section, dot, name = key.strip().partition(".")
+        if not (sep and dot and section and name and text.strip()):
+            raise InputError(expected("SECTION.KEY=VALUE", item, where="--set"))
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError:
+            raise InputError(expected("a YAML value after '='", item, where="--set")) from None
+        out.setdefault(section, {})[name] = value
+    return out
+
+
+def load_run_config(args, source=None):
+    """The resolved configuration: ``--config FILE``, then every ``--set SECTION.KEY=VALUE``, then the
+    settings ``source`` describes (its ``config_defaults``: a simulated robot's odometry noise and pan
+    policy) where the user left the default."""
+    from ..config import load_config
+
+    config = load_config(getattr(args, "config", None))
+    if getattr(args, "set", None):
+        config = config.with_overrides(parse_overrides(args.set), "--set")
+    if source is not None:
+        config = config.with_source_defaults(getattr(source, "config_defaults", None) or {})
+    return config

@@ -35,6 +35,7 @@ def motion_summary(result) -> dict:
             ate_rmse_ekf=ate_rmse(P, T), ate_rmse_dead_reckoning=ate_rmse(D, T),
             final_error_ekf=float(e_ekf[-1]), final_error_dead_reckoning=float(e_dr[-1]),
         )
+    if result.truth_of:  # which true feature each landmark is: known in simulation only
         reobs = reobservation(result)
         n_assoc = sum(a for a, _ in reobs.values())
         n_vis = sum(v for _, v in reobs.values())

@@ -89,17 +89,22 @@ def run(args) -> int:
 def _motion(console, scenario, sim, out, cov0, config):
     """The 1 m and 2 m motion with the on-line loop: every frame predicted, observed, updated, and new
     landmarks selected; Figure 10 and the run's files in ``out``."""
+    from ..evaluation import TruthObserver
     from ..io.results import write_run
-    from ..online import SimulatedSource, run_online
+    from ..online import run_online
+    from ..sim.source import SimulatedSource
     from ..viz.trajectory import figure10
     from ._report import frame_progress, print_motion_summary
 
     console.rule("[bold]motion[/]: on-line selection and localization with the joint EKF (paper Sec 5, Figs 8-10)")
+    source = SimulatedSource(sim)
+    truth = TruthObserver()
+    config = config.with_source_defaults(source.config_defaults)
     with frame_progress(console, "driving", len(sim)) as progress:
-        result = run_online(SimulatedSource(sim), cov0=cov0, config=config, progress=progress)
+        result = truth.result(run_online(source, start_cov=cov0, config=config, observers=[truth], progress=progress))
     write_run(out, result, config)
     figure10(out / "fig10_motion.png", result)
-    summary = print_motion_summary(console, result, scenario.robot.odometry)
+    summary = print_motion_summary(console, result, config.odometry)
     console.print(f"wrote {out}/trajectory.tum, dead_reckoning.tum, groundtruth.tum, landmarks.yaml, log.jsonl, "
                   "fig10_motion.png")
     return summary

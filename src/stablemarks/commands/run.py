@@ -64,37 +64,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o.add_argument("--no-figures", action="store_true", help="skip Figure 10")
 
 
-def parse_overrides(items: list[str]) -> dict:
-    """``["ekf.max_updates_per_frame=4", …]`` → ``{"ekf": {"max_updates_per_frame": 4}}`` (values read as YAML)."""
-    import yaml
-
-    out: dict = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        section, dot, name = key.strip().partition(".")
-        if not (sep and dot and section and name and text.strip()):
-            raise InputError(expected("SECTION.KEY=VALUE", item, where="--set"))
-        try:
-            value = yaml.safe_load(text)
-        except yaml.YAMLError:
-            raise InputError(expected("a YAML value after '='", item, where="--set")) from None
-        out.setdefault(section, {})[name] = value
-    return out
-
-
 def run(args) -> int:
-    from ..config import load_config
     from ..io.results import write_run
-    from ..io.sources import open_source
+    from ..io.sources import open_sequence
     from ..io.trajectory import write_kitti
+    from ..localizer import Localizer
     from ..maps import read_yaml
     from ..online import run_online
+    from ._common import load_run_config
     from ._report import frame_progress, print_motion_summary
 
     console = make_console()
-    config = load_config(args.config)
-    if args.set:
-        config = config.with_overrides(parse_overrides(args.set), "--set")
     if args.save_rrd:
         from ..io.rerun_log import require_rerun
 
@@ -102,33 +82,36 @@ def run(args) -> int:
     start = parse_triplet(args.pose, "x, y, theta", "--pose") if args.pose else None
     sigma = parse_triplet(args.pose_sigma, "σx, σy, σθ", "--pose-sigma")
     prior = read_yaml(args.prior_landmarks, "landmark map") if args.prior_landmarks else None
+    observers = []
     with contextlib.ExitStack() as stack:
-        source = open_source(args.source, left_topic=args.left_topic, right_topic=args.right_topic,
-                             odom_topic=args.odom_topic, pan_topic=args.pan_topic, pan_joint=args.pan_joint,
-                             calib=args.calib, map=args.map, mount=args.camera, odometry=args.odometry,
-                             tolerance=args.sync_tolerance, start_pose=start)
-        if hasattr(source, "close"):
-            stack.callback(source.close)
-        for note in getattr(source, "notes", ()):
+        source = open_sequence(args.source, left_topic=args.left_topic, right_topic=args.right_topic,
+                               odom_topic=args.odom_topic, pan_topic=args.pan_topic, pan_joint=args.pan_joint,
+                               calib=args.calib, map=args.map, mount=args.camera, odometry=args.odometry,
+                               tolerance=args.sync_tolerance, start_pose=start)
+        stack.callback(source.close)
+        config = load_run_config(args, source)
+        for note in source.notes:
             console.print(f"note: {note}")
         out = Path(args.out) if args.out else Path("results") / source.name
-        with frame_progress(console, f"{source.name}: {len(source)} frames", len(source)) as progress:
-            result = run_online(source, cov0=np.diag(sigma**2), config=config, method=args.method,
-                                prior_landmarks=prior, progress=progress)
+        localizer = Localizer(source.world_map, source.camera, start_pose=source.initial_pose,
+                              start_cov=np.diag(sigma**2), config=config, method=args.method, prior_landmarks=prior)
         rrd = None
         if args.save_rrd:
-            from ..io.rerun_log import save_rrd
+            from ..io.rerun_log import RerunRecorder
 
-            rrd = save_rrd(args.save_rrd, result, source, config)
+            rrd = stack.enter_context(RerunRecorder(args.save_rrd, source, config))
+            observers.append(rrd)
+        with frame_progress(console, f"{source.name}: {len(source)} frames", len(source)) as progress:
+            result = run_online(source, localizer, observers=observers, progress=progress)
     paths = write_run(out, result, config)
     if args.kitti:
         paths["kitti"] = write_kitti(out / "trajectory.kitti", result.poses)
     if rrd is not None:
-        paths["rrd"] = rrd
+        paths["rrd"] = rrd.path
     if not args.no_figures:
         from ..viz.trajectory import figure10
 
         paths["figure"] = figure10(out / "fig10_motion.png", result)
-    print_motion_summary(console, result, getattr(source, "noise", None))
+    print_motion_summary(console, result, config.odometry)
     console.print("wrote " + ", ".join(str(p) for p in paths.values()))
     return 0

@@ -11,8 +11,9 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from ..errors import InputError, expected
-from ..io.sequence import FRAME_PERIOD, write_simulated_sequence
+from ..io.sequence import FRAME_PERIOD
 from ..sim import builtin_scenarios, load_scenario, simulate_run
+from ..sim.export import write_simulated_sequence
 
 NAME = "simulate"
 HELP = "simulate a scenario and write it as a sequence folder (images, calibration, map, odometry, ground truth)"

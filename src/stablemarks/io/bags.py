@@ -34,7 +34,7 @@ from ..errors import ImageError, InputError, SequenceError
 from ..geometry import StereoCamera
 from ..maps import Map
 from .calibration import StereoCalibration
-from .sources import (
+from .recorded import (
     BAG_SUFFIXES,
     SYNC_TOLERANCE,
     RecordedSource,
@@ -129,7 +129,7 @@ class BagSource(RecordedSource):
     def __init__(self, path: str | Path, *, left_topic: str, right_topic: str, odom_topic: str,
                  calibration: StereoCalibration, camera: StereoCamera, world_map: Map,
                  pan_topic: str | None = None, pan_joint: str | None = None, tolerance: float = SYNC_TOLERANCE,
-                 start_pose=None, noise=None):
+                 start_pose=None):
         self.path = Path(path)
         self._AnyReader, self._errors, self._typestore = _rosbags()
         self.topics = {"left": left_topic, "right": right_topic}
@@ -163,7 +163,7 @@ class BagSource(RecordedSource):
         self._left = [(int(bag_left[i]), int(t_left[i])) for i in pairs[:, 0]]
         self._right = [(int(bag_right[j]), int(t_right[j])) for j in pairs[:, 1]]
         super().__init__(name, calibration, camera, world_map, stamps, odometry, pans, start_pose=start_pose,
-                         noise=noise, notes=notes)
+                         notes=notes)
 
     # -- reading
     def _open(self):
@@ -179,10 +179,10 @@ class BagSource(RecordedSource):
         reader = self._open()
         try:
             topics = reader.topics
-            wanted = {"--left-topic": (left_topic, IMAGE_TYPES), "--right-topic": (right_topic, IMAGE_TYPES),
-                      "--odom-topic": (odom_topic, ODOMETRY_TYPES)}
+            wanted = {"left_topic": (left_topic, IMAGE_TYPES), "right_topic": (right_topic, IMAGE_TYPES),
+                      "odom_topic": (odom_topic, ODOMETRY_TYPES)}
             if pan_topic is not None:
-                wanted["--pan-topic"] = (pan_topic, PAN_TYPES)
+                wanted["pan_topic"] = (pan_topic, PAN_TYPES)
             for option, (topic, types) in wanted.items():
                 self._check_topic(topics, option, topic, types)
             images = {left_topic: ([], []), right_topic: ([], [])}
@@ -210,7 +210,7 @@ class BagSource(RecordedSource):
                     joint = pan_joint if pan_joint is not None else (names[0] if len(names) == 1 else None)
                     if joint is None:
                         raise SequenceError(f"{self.path}: {pan_topic}: joint states of several joints "
-                                            f"({', '.join(names)}): pass --pan-joint NAME")
+                                            f"({', '.join(names)}): pass `pan_joint`")
                     if joint in names:
                         pan.append((stamp_ns(msg), float(msg.position[names.index(joint)])))
         except (*self._errors, OSError) as exc:
@@ -243,13 +243,13 @@ class BagSource(RecordedSource):
 
     def _check_topic(self, topics: dict, option: str, topic: str | None, types: Sequence[str]) -> None:
         if topic is None:
-            raise InputError(f"{self.path}: a bag needs {option} TOPIC ({' or '.join(types)})")
+            raise InputError(f"{self.path}: a bag needs `{option}`, a topic of {' or '.join(types)}")
         if topic not in topics:
             have = ", ".join(f"{t} ({info.msgtype})" for t, info in sorted(topics.items())) or "none"
-            raise SequenceError(f"{self.path}: no topic {topic!r} ({option}); the bag has: {have}")
+            raise SequenceError(f"{self.path}: no topic {topic!r} (`{option}`); the bag has: {have}")
         msgtype = topics[topic].msgtype
         if msgtype not in types:
-            raise SequenceError(f"{self.path}: {topic} ({option}) is {msgtype}, expected {' or '.join(types)}")
+            raise SequenceError(f"{self.path}: {topic} (`{option}`) is {msgtype}, expected {' or '.join(types)}")
 
     def _fetch(self, side: str, k: int) -> np.ndarray:
         t_bag, t_header = (self._left if side == "left" else self._right)[k]
@@ -292,7 +292,7 @@ def _reason(exc: BaseException) -> str:
 
 def open_bag(path: str | Path, *, left_topic=None, right_topic=None, odom_topic=None, pan_topic=None,
              pan_joint=None, calib=None, map=None, mount=None, tolerance: float = SYNC_TOLERANCE,
-             start_pose=None, noise=None) -> BagSource:
+             start_pose=None) -> BagSource:
     """Open a bag with the calibration ``calib``, the map file ``map`` and the mount file ``mount`` (default
     ``mount.yaml`` beside the calibration); see :class:`BagSource` and :func:`~stablemarks.io.sources.open_source`.
 
@@ -304,9 +304,9 @@ def open_bag(path: str | Path, *, left_topic=None, right_topic=None, odom_topic=
     world_map = load_world_map(map, what)
     source = BagSource(path, left_topic=left_topic, right_topic=right_topic, odom_topic=odom_topic,
                        calibration=calibration, camera=camera, world_map=world_map, pan_topic=pan_topic,
-                       pan_joint=pan_joint, tolerance=tolerance, start_pose=start_pose, noise=noise)
+                       pan_joint=pan_joint, tolerance=tolerance, start_pose=start_pose)
     try:
-        source.images(0, source.pan(0, None, None))
+        source.pair(0)
     except BaseException:
         source.close()
         raise

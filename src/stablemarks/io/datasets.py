@@ -48,7 +48,7 @@ from ..errors import ConfigError, SequenceError, expected
 from ..geometry import wrap_angle
 from .calibration import Mount, StereoCalibration, _stereo_rectify, load_calibration
 from .images import load_image_gray
-from .sources import (
+from .recorded import (
     SYNC_TOLERANCE,
     RecordedSource,
     check_stamps,
@@ -71,7 +71,7 @@ def _odometry_file(odometry, folder: Path, what: str) -> Path:
     if (folder / "odometry.csv").is_file():
         return folder / "odometry.csv"
     raise SequenceError(f"{folder}: {what} has no wheel odometry: put an odometry.csv (stamp,x,y,theta) in the "
-                        "folder or pass --odometry CSV")
+                        "folder or pass `odometry` (an odometry CSV)")
 
 
 def _numbers(text: str, where: str) -> list[float]:
@@ -100,7 +100,7 @@ class FolderSource(RecordedSource):
 
 
 def _check_first(source: RecordedSource) -> RecordedSource:
-    source.images(0, source.pan(0, None, None))
+    source.pair(0)
     return source
 
 
@@ -154,7 +154,7 @@ def kitti_planar_poses(path: str | Path) -> np.ndarray:
 
 
 def open_kitti(path: str | Path, *, map=None, mount=None, odometry=None, tolerance: float = SYNC_TOLERANCE,
-               start_pose=None, noise=None) -> FolderSource:
+               start_pose=None) -> FolderSource:
     """Open a KITTI odometry sequence folder (module docstring); every file is checked here."""
     root = Path(path)
     what = f"the KITTI sequence {root}"
@@ -199,7 +199,7 @@ def open_kitti(path: str | Path, *, map=None, mount=None, odometry=None, toleran
     idx = np.flatnonzero(keep)
     return _check_first(FolderSource(
         root.name, calibration, camera, world_map, stamps[keep], odom, np.full(len(idx), camera.pan),
-        start_pose=start_pose, noise=noise, groundtruth=groundtruth, notes=notes,
+        start_pose=start_pose, groundtruth=groundtruth, notes=notes,
         left_paths=[lefts[i] for i in idx], right_paths=[rights[i] for i in idx]))
 
 
@@ -329,7 +329,7 @@ def euroc_groundtruth(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def open_euroc(path: str | Path, *, calib=None, map=None, mount=None, odometry=None,
-               tolerance: float = SYNC_TOLERANCE, start_pose=None, noise=None) -> FolderSource:
+               tolerance: float = SYNC_TOLERANCE, start_pose=None) -> FolderSource:
     """Open a EuRoC MAV sequence (module docstring); every file is checked here."""
     root = Path(path)
     mav0 = root if root.name == "mav0" and (root / "cam0").is_dir() else root / "mav0"
@@ -357,5 +357,5 @@ def open_euroc(path: str | Path, *, calib=None, map=None, mount=None, odometry=N
         groundtruth = poses_at(*euroc_groundtruth(gt_path), stamps, tolerance)
     return _check_first(FolderSource(
         folder.name, calibration, camera, world_map, stamps, odom, np.full(len(stamps), camera.pan),
-        start_pose=start_pose, noise=noise, groundtruth=groundtruth, notes=notes + more,
+        start_pose=start_pose, groundtruth=groundtruth, notes=notes + more,
         left_paths=[left[i] for i in pairs[:, 0]], right_paths=[right[j] for j in pairs[:, 1]]))

@@ -8,38 +8,14 @@ pair stays photometrically consistent.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from ..errors import ImageError
+from ..vision.gray import to_gray8
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .calibration import StereoCalibration
-
-
-def to_gray8(image: np.ndarray, name: str = "image") -> np.ndarray:
-    """Convert an image (H, W[, C]) to 8-bit grayscale (H, W) ``uint8``; ``name`` is used in messages."""
-    img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
-    if img.ndim == 3 and img.shape[2] == 2:  # gray + alpha
-        img = img[..., 0]
-    if img.ndim == 3:
-        codes = {3: cv2.COLOR_BGR2GRAY, 4: cv2.COLOR_BGRA2GRAY}
-        if img.shape[2] not in codes:
-            raise ImageError(f"{name}: expected 1, 2, 3 or 4 channels, got {img.shape[2]}")
-        img = cv2.cvtColor(img, codes[img.shape[2]])
-    if img.ndim != 2:
-        raise ImageError(f"{name}: expected a 2D image (H, W[, C]), got shape {img.shape}")
-    if img.dtype == np.uint8:
-        return np.ascontiguousarray(img)
-    if img.dtype == np.uint16:
-        return ((img.astype(np.uint32) + 128) // 257).astype(np.uint8)
-    if img.dtype in (np.float32, np.float64):
-        return np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
-    raise ImageError(f"{name}: expected 8-bit, 16-bit or float pixels, got {img.dtype}")
+__all__ = ["load_image_gray", "load_stereo_pair", "to_gray8"]
 
 
 def load_image_gray(path: str | Path) -> np.ndarray:
@@ -53,10 +29,10 @@ def load_image_gray(path: str | Path) -> np.ndarray:
     return to_gray8(img, str(path))
 
 
-def load_stereo_pair(
-    left_path: str | Path, right_path: str | Path, calibration: StereoCalibration | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+def load_stereo_pair(left_path: str | Path, right_path: str | Path, calibration=None) -> tuple[np.ndarray, np.ndarray]:
     """Read a stereo pair as 8-bit grayscale images (H, W), rectified when the calibration asks for it.
+
+    ``calibration`` is a :class:`~stablemarks.io.calibration.StereoCalibration` (or None).
 
     With a ``calibration`` whose images are not already rectified (distortion, rectifying rotations or
     ``K ≠ P``), the raw images are rectified with it; otherwise they are returned as read.

@@ -1,4 +1,4 @@
-"""A finished on-line run as a rerun recording (``.rrd``), for the rerun viewer (``pip install
+"""An on-line run as a rerun recording (``.rrd``), for the rerun viewer (``pip install
 'stablemarks[rerun]'``, then ``rerun run.rrd``). matplotlib figures stay the default; this is optional.
 
 What is logged (map frame, metres, ``z`` up, REP-103), on the timelines ``frame`` (index) and ``time``
@@ -6,7 +6,7 @@ What is logged (map frame, metres, ``z`` up, REP-103), on the timelines ``frame`
 
 ``world/walls``                 the map's walls as rectangles from ``z_low`` to ``z_high``: reference planes
                                 blue, other walls grey; ``world/walls/free_edges`` orange verticals
-``world/landmarks``             every landmark the filter holds by that frame, at its final estimate: a
+``world/landmarks``             every landmark the filter holds in that frame, at its estimate then: a
                                 vertical line over its height and, on the floor, its 2σ uncertainty (an
                                 ellipse; a segment along the wall for a wall landmark, Eq 17)
 ``world/trajectory/*``          the estimate (green), dead reckoning (grey) and the truth (white) so far
@@ -17,8 +17,9 @@ What is logged (map frame, metres, ``z`` up, REP-103), on the timelines ``frame`
                                 estimate
 ``log``                         one line per frame: pairs, associations, updates, new landmarks
 
-The images are read again from the source after the run (nothing is kept in memory during it), and the
-file is written under a temporary name and renamed at the end.
+:class:`RerunRecorder` is an observer of :func:`stablemarks.online.run_online`: it logs each frame as the
+loop steps through it (the images and segments the front end already has; nothing is computed again or
+kept in memory), under a temporary name renamed when the recorder closes.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ def require_rerun():
     try:
         import rerun
     except ImportError:
-        raise StablemarksError(f"--save-rrd needs the rerun-sdk package: {INSTALL_HINT}") from None
+        raise StablemarksError(f"`save_rrd` needs the rerun-sdk package: {INSTALL_HINT}") from None
     return rerun
 
 
@@ -127,56 +128,67 @@ def _marks(camera, X, landmarks, colour_of) -> tuple[list, list]:
     return left, right
 
 
-def save_rrd(path: str | Path, result, source, config: Config = Config()) -> Path:
-    """Write ``result`` (an :class:`~stablemarks.online.OnlineResult` of ``source``) as a rerun recording.
+class RerunRecorder:
+    """Log a run frame by frame to ``path`` (module docstring); use as a context manager around the loop and
+    pass it as an observer: ``with RerunRecorder(path, source, config) as rec: run_online(..., observers=[rec])``.
 
-    ``source`` gives the images again (:meth:`images` with each frame's recorded pan) and the camera;
-    ``config.segments`` the segment extraction drawn on them. Raises :class:`StablemarksError` when
-    rerun-sdk is not installed.
+    ``source`` gives the map, the camera and the name; ``config`` is unused but kept for symmetry with the
+    loop's other outputs. Raises :class:`StablemarksError` when rerun-sdk is not installed.
     """
-    rr = require_rerun()
-    from ..vision.segments import extract_vertical_segments
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    landmarks = [result.ekf.landmark(i) for i in result.ekf.landmark_ids]
-    height = max((p.z[1] for p in result.world_map.planes), default=2.5)
-    rec = rr.RecordingStream("stablemarks", recording_id=f"{result.name}-{result.method}")
-    try:
-        rec.save(tmp)
-        _log_map(rec, rr, result.world_map)
-        truth = result.true_poses
-        for k, r in enumerate(result.records):
-            rec.set_time("frame", sequence=k)
-            rec.set_time("time", duration=float(r.stamp))
-            _log_landmarks(rec, rr, [lm for lm in landmarks if lm.first_frame is None or lm.first_frame <= k], height)
-            tracks = {"estimate": (result.poses, _GREEN), "dead_reckoning": (result.dead_reckoning, _GREY)}
-            if truth is not None:
-                tracks["truth"] = (truth, _WHITE)
-            for name, (poses, colour) in tracks.items():
-                rec.log(f"world/trajectory/{name}", rr.LineStrips3D([_floor(poses[: k + 1, :2], 0.01)], colors=colour,
+    def __init__(self, path: str | Path, source, config: Config = Config()):
+        self.rr = require_rerun()
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._tmp = self.path.with_name(f".{self.path.name}.tmp")
+        self.world_map = source.world_map
+        self.height = max((p.z[1] for p in self.world_map.planes), default=2.5)
+        self.rec = self.rr.RecordingStream("stablemarks", recording_id=f"{source.name}")
+        self._tracks: dict[str, list] = {"estimate": [], "dead_reckoning": [], "truth": []}
+
+    def __enter__(self) -> RerunRecorder:
+        self.rec.save(self._tmp)
+        _log_map(self.rec, self.rr, self.world_map)
+        return self
+
+    def __call__(self, frame, est, localizer) -> None:
+        rr, rec, r = self.rr, self.rec, est.record
+        k = r.index
+        rec.set_time("frame", sequence=k)
+        rec.set_time("time", duration=float(r.stamp))
+        landmarks = localizer.landmarks()
+        _log_landmarks(rec, rr, landmarks, self.height)
+        self._tracks["estimate"].append(r.pose[:2])
+        self._tracks["dead_reckoning"].append(r.dead_reckoning[:2])
+        if frame.true_pose is not None:
+            self._tracks["truth"].append(np.asarray(frame.true_pose, float)[:2])
+        for name, colour in (("estimate", _GREEN), ("dead_reckoning", _GREY), ("truth", _WHITE)):
+            if self._tracks[name]:
+                rec.log(f"world/trajectory/{name}", rr.LineStrips3D([_floor(self._tracks[name], 0.01)], colors=colour,
                                                                     radii=0.01))
-            X = r.pose
-            heading = np.array([np.cos(X[2]), np.sin(X[2]), 0.0])
-            view = np.array([np.cos(X[2] + r.pan), np.sin(X[2] + r.pan), 0.0])
-            rec.log("world/robot", rr.Arrows3D(vectors=[0.3 * heading], origins=[[X[0], X[1], 0.02]], colors=_GREEN))
-            rec.log("world/robot/uncertainty", rr.LineStrips3D([_floor(ellipse(X[:2], r.cov_pose[:2, :2]), 0.02)],
-                                                               colors=_GREEN, radii=0.005))
-            camera = source.camera.with_pan(r.pan)
-            centre = camera.camera_pose(X).translation
-            rec.log("world/robot/camera", rr.Arrows3D(vectors=[0.5 * view], origins=[[*centre, camera.mount_height]],
-                                                      colors=_CYAN))
-            left, right, _ = source.images(k, r.pan)
+        X = r.pose
+        heading = np.array([np.cos(X[2]), np.sin(X[2]), 0.0])
+        view = np.array([np.cos(X[2] + r.pan), np.sin(X[2] + r.pan), 0.0])
+        rec.log("world/robot", rr.Arrows3D(vectors=[0.3 * heading], origins=[[X[0], X[1], 0.02]], colors=_GREEN))
+        rec.log("world/robot/uncertainty", rr.LineStrips3D([_floor(ellipse(X[:2], r.cov_pose[:2, :2]), 0.02)],
+                                                           colors=_GREEN, radii=0.005))
+        camera = localizer.camera.with_pan(r.pan)
+        centre = camera.camera_pose(X).translation
+        rec.log("world/robot/camera", rr.Arrows3D(vectors=[0.5 * view], origins=[[*centre, camera.mount_height]],
+                                                  colors=_CYAN))
+        if est.front is not None:
             colour_of = {i: _GREEN for i in r.observed} | {i: _YELLOW for i in r.new}
             marks_left, marks_right = _marks(camera, X, landmarks, colour_of)
-            _log_image(rec, rr, "left", left, extract_vertical_segments(left, config.segments), marks_left)
-            _log_image(rec, rr, "right", right, extract_vertical_segments(right, config.segments), marks_right)
-            rec.log("log", rr.TextLog(f"frame {k}: {r.n_pairs} segment pairs, {len(r.associated)} associated, "
-                                      f"{len(r.observed)} updated, {len(r.new)} new, {r.n_landmarks} landmarks"))
-        rec.flush()
-        rec.disconnect()
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+            _log_image(rec, rr, "left", frame.left, est.front.left_segments, marks_left)
+            _log_image(rec, rr, "right", frame.right, est.front.right_segments, marks_right)
+        rec.log("log", rr.TextLog(f"frame {k}: {r.n_pairs} segment pairs, {len(r.associated)} associated, "
+                                  f"{len(r.observed)} updated, {len(r.new)} new, {r.n_landmarks} landmarks"))
+
+    def __exit__(self, exc_type, *exc) -> None:
+        try:
+            self.rec.flush()
+            self.rec.disconnect()
+            if exc_type is None:
+                os.replace(self._tmp, self.path)
+        finally:
+            self._tmp.unlink(missing_ok=True)

@@ -90,6 +90,7 @@ def write_run(out_dir: str | Path, result, config=None) -> dict[str, Path]:
     """
     import yaml
 
+    from ..localizer import landmark_map_document
     from .trajectory import write_tum
 
     out = Path(out_dir)
@@ -104,14 +105,7 @@ def write_run(out_dir: str | Path, result, config=None) -> dict[str, Path]:
         write_tum(tmp, stamps, poses)
         tmp.replace(out / f"{name}.tum")
         paths[name] = out / f"{name}.tum"
-    doc = {
-        "frame": "map",
-        "units": "metres; s is the distance along the wall from its free edge `edge`; var_s in m²",
-        "method": result.method,
-        **result.ekf.to_dict(joint=True),
-    }
-    doc.pop("pose", None)
-    doc.pop("cov_pose", None)
+    doc = landmark_map_document(result.ekf, result.method)
     _atomic_text(out / "landmarks.yaml", yaml.safe_dump(doc, sort_keys=False))
     paths["landmarks"] = out / "landmarks.yaml"
     _atomic_text(out / "log.jsonl", "".join(json.dumps(r.to_dict()) + "\n" for r in result.records))

@@ -85,13 +85,13 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 import yaml
 
 from ..errors import ImageError, InputError, SequenceError, expected
+from ..frames import Frame
 from ..geometry import SE2, StereoCamera, wrap_angle
 from ..maps import Map, read_yaml
 from .calibration import (
@@ -104,9 +104,6 @@ from .calibration import (
 )
 from .images import load_stereo_pair
 from .trajectory import read_tum, write_tum
-
-if TYPE_CHECKING:  # pragma: no cover
-    from ..sim.run import Run
 
 FORMAT = "stablemarks-sequence"
 """The ``format`` field of ``sequence.yaml``."""
@@ -434,10 +431,10 @@ def _check_target(out: Path, force: bool) -> None:
     if not any(out.iterdir()):
         return
     if not force:
-        raise InputError(f"{out}: folder exists and is not empty (--force replaces a sequence folder)")
+        raise InputError(f"{out}: folder exists and is not empty (`force` replaces a sequence folder)")
     if not (out / SEQUENCE_FILE).is_file():
         raise InputError(f"{out}: not a sequence folder (no {SEQUENCE_FILE}); refusing to replace it, even "
-                         "with --force")
+                         "with `force`")
 
 
 def _install(tmp: Path, out: Path, force: bool) -> None:
@@ -586,56 +583,38 @@ def _write_contents(tmp: Path, name, description, camera, world_map, stamps, odo
     (tmp / SEQUENCE_FILE).write_text(yaml.safe_dump(meta, sort_keys=False))
 
 
-def write_simulated_sequence(
-    run: Run,
-    out_dir: str | Path,
-    *,
-    n_frames: int | None = None,
-    period: float = FRAME_PERIOD,
-    force: bool = False,
-    on_frame: Callable[[int], None] | None = None,
-) -> Path:
-    """Render the first ``n_frames`` frames of a simulated run (all by default) into a sequence folder.
+class SequenceSource:
+    """A recorded sequence folder as a :class:`~stablemarks.frames.FrameSource` (pans as recorded).
 
-    Frame ``k`` is stamped ``k · period`` [s]. ``odometry.csv`` holds the run's dead reckoning (its noisy
-    odometry integrated from the true start), ``groundtruth.tum`` the true poses, ``groundtruth.json`` the
-    run's header and each frame's truth (:meth:`Run.record`) with its stamp and image paths, and
-    ``sequence.yaml`` the true start as ``initial_pose``. ``on_frame(k)`` is called after frame ``k`` is
-    written (a progress bar). Atomic as :func:`write_sequence`.
+    ``start_pose`` (3,) overrides the sequence's ``initial_pose`` (None: the sequence's, which may be None).
     """
-    if n_frames is None:
-        n_frames = len(run)
-    if isinstance(n_frames, bool) or not isinstance(n_frames, int | np.integer) or not 1 <= n_frames <= len(run):
-        raise InputError(expected(f"a number of frames in [1, {len(run)}]", n_frames, where="frames"))
-    if not (math.isfinite(period) and period > 0):
-        raise InputError(expected("a positive frame period [s]", period, where="period"))
-    n = int(n_frames)
-    stamps = period * np.arange(n)
-    records: list[dict] = []
 
-    def images() -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        for k in range(n):
-            frame = run.render(k)
-            records.append({"stamp": float(stamps[k]), "left": image_name("left", k),
-                            "right": image_name("right", k), **run.record(k, frame)})
-            yield frame.left, frame.right
-            if on_frame is not None:
-                on_frame(k)
+    config_defaults: dict = {}
 
-    scenario = run.scenario
-    return write_sequence(
-        out_dir,
-        name=scenario.name,
-        description=f"simulated run of scenario {scenario.name!r} ({scenario.source}), seed {run.seed}, "
-                    f"{n} of {len(run)} frames",
-        camera=scenario.camera,
-        world_map=scenario.map,
-        stamps=stamps,
-        odometry=np.array([p.as_array() for p in run.dead_reckoning[:n]]),
-        pans=np.array(run.pans[:n]),
-        images=images(),
-        groundtruth=np.array([p.as_array() for p in run.poses[:n]]),
-        truth=lambda: {**run.header(), "n_frames": n, "frame_period": period, "frames": records},
-        initial_pose=scenario.robot.start,
-        force=force,
-    )
+    def __init__(self, sequence: Sequence, start_pose=None):
+        self.sequence = sequence
+        self.name = sequence.name
+        self.camera = sequence.camera
+        self.world_map = sequence.world_map
+        if start_pose is None and sequence.initial_pose is not None:
+            start_pose = sequence.initial_pose.as_array()
+        self.initial_pose = None if start_pose is None else np.asarray(start_pose, dtype=float)
+        self.notes: list[str] = []
+
+    def __len__(self) -> int:
+        return len(self.sequence)
+
+    def __iter__(self) -> Iterator[Frame]:
+        seq = self.sequence
+        for k in range(len(seq)):
+            left, right = seq.frame(k)
+            yield Frame(k, float(seq.stamps[k]), left, right, np.asarray(seq.odometry[k], dtype=float),
+                        float(seq.pans[k]), true_pose=self.true_pose(k))
+
+    def true_pose(self, k: int) -> np.ndarray | None:
+        """(3,) the true pose of frame ``k`` in the map, or None."""
+        gt = self.sequence.groundtruth
+        return None if gt is None else np.asarray(gt[k], dtype=float)
+
+    def close(self) -> None:
+        """Nothing to release."""

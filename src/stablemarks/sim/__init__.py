@@ -9,6 +9,7 @@
 from .render import Renderer, SimFrame, render_stereo
 from .run import Run, simulate_run
 from .scenario import Scenario, builtin_scenarios, load_scenario, parse_scenario
+from .source import SimulatedSource
 from .truth import EdgeTruth, FrameTruth, frame_truth
 
 __all__ = [
@@ -18,6 +19,7 @@ __all__ = [
     "Run",
     "Scenario",
     "SimFrame",
+    "SimulatedSource",
     "builtin_scenarios",
     "frame_truth",
     "load_scenario",

@@ -44,9 +44,9 @@ from scipy.optimize import linear_sum_assignment
 from scipy.special import chdtri
 from threadpoolctl import ThreadpoolController
 
-from .errors import ConfigError, GeometryError, InputError, expected
-from .geometry import SE2, SIGMA_IMG, StereoCamera, wrap_angle
-from .maps import Map, ReferencePlane
+from ..errors import ConfigError, GeometryError, InputError, expected
+from ..geometry import SE2, StereoCamera, wrap_angle
+from ..maps import Map, ReferencePlane
 
 KINDS = ("wall", "point")
 EDGES = ("p1", "p2")
@@ -101,14 +101,12 @@ class EKFConfig:
     gate_probability : probability mass of the χ² gate (2 dof) on an association's Mahalanobis distance.
     max_updates_per_frame : ``k``, how many associated landmarks update the state per frame (the paper's
         "several, less uncertain landmarks", Sec 5), chosen by :meth:`JointEKF.select_for_update`.
-    sigma_img : column noise of one image [px] (Sec 2.3.1); ``R = sigma_img² I`` per observation.
     margin_px : a landmark is a candidate for association only if both its predicted columns lie this
         far inside the image [px].
     """
 
     gate_probability: float = 0.99
     max_updates_per_frame: int = 6
-    sigma_img: float = SIGMA_IMG
     margin_px: float = 0.0
 
     def __post_init__(self) -> None:
@@ -118,8 +116,6 @@ class EKFConfig:
         k = self.max_updates_per_frame
         if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
             raise ConfigError(expected("a positive integer", k, where="ekf.max_updates_per_frame"))
-        if not (np.isfinite(self.sigma_img) and self.sigma_img > 0):
-            raise ConfigError(expected("a positive number of pixels", self.sigma_img, where="ekf.sigma_img"))
         if not (np.isfinite(self.margin_px) and self.margin_px >= 0):
             raise ConfigError(expected("a non-negative number of pixels", self.margin_px, where="ekf.margin_px"))
 
@@ -344,7 +340,8 @@ class JointEKF:
 
     Parameters
     ----------
-    camera : the stereo head (its ``pan`` is replaced per frame by the ``pan`` argument of the methods).
+    camera : the stereo head (its ``pan`` is replaced per frame by the ``pan`` argument of the methods); its
+        ``sigma_img`` [px] is the observation noise, ``R = sigma_img² I`` per observation (Sec 2.3.1).
     pose : (3,) or :class:`SE2`, initial ``(x, y, theta)`` in the map frame.
     cov_pose : (3, 3) over ``(x [m], y [m], theta [rad])``.
     config : :class:`EKFConfig`.
@@ -362,7 +359,7 @@ class JointEKF:
         self._x = x0.copy()
         self._x[2] = wrap_angle(self._x[2])
         self._P = _covariance(cov_pose, 3, "ekf.cov_pose").copy()
-        self._var_img = self.config.sigma_img**2
+        self._var_img = float(camera.sigma_img) ** 2
         self._R1 = self._var_img * np.eye(2)
         self._panned = (camera.pan, camera)
         self._tracks: dict[int, _Track] = {}

@@ -1,0 +1,188 @@
+"""Data association of one frame's segment pairs with the landmarks of the filter (paper Sec 5).
+
+Everything that decides which measured line is which landmark lives here; the gating and joint
+compatibility primitives it builds on are methods of :class:`~stablemarks.estimation.ekf.JointEKF`
+(:meth:`~JointEKF.associate_joint`, :meth:`~JointEKF.joint_compatible`). The cues, strongest first:
+
+- the *pattern* along a wall (:func:`match_along_wall`): this frame's candidates and the wall's
+  landmarks are both positions along the wall from its edge, so they differ by one common offset (the
+  two boundary errors) whatever the pose error;
+- image-space gating with joint compatibility (all landmarks share the pose error);
+- the vertical extent (:func:`height_cost`): lines of other heights or lengths cost more;
+- the polarity of the brightness step along the wall (:func:`wall_polarity`, :func:`polarity_cost`):
+  an edge never matches one of the opposite step.
+
+Units: image columns in pixels, positions in metres in the map frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from .ekf import JointEKF
+
+__all__ = ["associate_frame", "height_cost", "is_duplicate", "match_along_wall", "polarity_cost", "wall_polarity"]
+
+
+def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, model=None,
+                    polarity: np.ndarray | None = None, centre=None) -> list[tuple[int, int]]:
+    """Pairs (landmark id, segment-pair index) for this frame's update.
+
+    Wall landmarks are found by the *pattern* of this frame's candidates along each wall (their positions
+    relative to the wall's edge do not depend on the pose error, and the offsets between features on one
+    wall are known to a few mm): :func:`match_along_wall`, kept if jointly compatible. Point landmarks, and
+    wall landmarks the pattern leaves unmatched, go through the image-space association with joint
+    compatibility and the vertical-extent cost; each such pair is added only if the whole set stays
+    jointly compatible. ``polarity`` (M,): the sign of each pair's brightness step in the left image, seen from
+    the camera centre ``centre`` (2,); a wall landmark never matches an edge whose step along its wall is the
+    opposite (a bar's two edges, equally long and a bar's width apart, differ only in it).
+    """
+    if polarity is None or centre is None:
+        polarity, centre = np.zeros(len(measured), dtype=int), np.zeros(2)
+    polarity = np.asarray(polarity, dtype=int)
+    in_view = set(ekf.visible(pan))
+    walls: list[list[tuple[int, int]]] = []
+    if model is not None:
+        for plane_model in model.planes:
+            plane = plane_model.fit.plane
+            matched = [(i, c) for i, c in match_along_wall(ekf, plane, plane_model.candidates,
+                                                           polarity=wall_polarity(polarity, plane, centre))
+                       if i in in_view]
+            if matched:
+                walls.append(matched)
+    # Wall by wall, most features first: one wall's wrong pattern must not throw out the others' right ones.
+    chosen: list[tuple[int, int]] = []
+    for matched in sorted(walls, key=len, reverse=True):
+        if ekf.joint_compatible(chosen + matched, measured, pan):
+            chosen += matched
+    taken_l = {i for i, _ in chosen}
+    taken_p = {j for _, j in chosen}
+    rest = [i for i in ekf.landmark_ids if i not in taken_l]
+    free = [j for j in range(len(measured)) if j not in taken_p]
+    if rest and free:
+        cost = height_cost(ekf, pairs, pan) + polarity_cost(ekf, polarity, centre)
+        rows = [ekf.landmark_ids.index(i) for i in rest]
+        sub = ekf.associate_joint(measured[free], pan, candidates=rest, extra_cost=cost[np.ix_(rows, free)])
+        for i, j in sub:
+            trial = chosen + [(i, free[j])]
+            if ekf.joint_compatible(trial, measured, pan):
+                chosen = trial
+    return sorted(chosen, key=lambda q: q[1])
+
+
+def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
+                     polarity: np.ndarray | None = None) -> list[tuple[int, int]]:
+    """Match this frame's candidates on ``plane`` with the wall landmarks on it, by their pattern.
+
+    Candidates and landmarks are placed along the wall (from ``p1``). The two sets differ by one common
+    offset — the difference of the boundary errors, ``σ_δ² = σ_b,now² + var_landmark`` — and by each
+    feature's own small error. Every candidate-landmark pair proposes an offset within ``3σ_δ``; the offset
+    that matches the most features (ties: least squared residual) wins, and features are then paired
+    one-to-one within ``tol`` σ of their own errors. Features whose vertical extents disagree never match;
+    among offsets that match equally many, the likeliest one (its own prior and the residuals) wins.
+    Returns ``(landmark id, segment-pair index)``.
+    """
+    lms = [ekf.landmark(i) for i in ekf.landmark_ids]
+    lms = [lm for lm in lms if lm.kind == "wall" and lm.plane_id == plane.id]
+    if not lms or not candidates:
+        return []
+    a = np.array([float(plane.along(lm.position)) for lm in lms])
+    var_a = np.array([float(lm.cov[0, 0]) for lm in lms])
+    c = np.array([float(plane.along(cd.P)) for cd in candidates])
+    sf = np.array([cd.sigma_f for cd in candidates])
+    sb = max(cd.sigma_b for cd in candidates)
+    # heights must agree: one vertical extent (mostly) inside the other (a segment may be seen in part)
+    zl = np.array([[lm.z_low if lm.z_low is not None else -np.inf for lm in lms]])
+    zh = np.array([[lm.z_high if lm.z_high is not None else np.inf for lm in lms]])
+    cl = np.array([[cd.z_low] for cd in candidates])
+    ch = np.array([[cd.z_high] for cd in candidates])
+    inter = np.clip(np.minimum(zh, ch) - np.maximum(zl, cl), 0.0, None)
+    shorter = np.maximum(np.minimum(zh - zl, ch - cl), 1e-3)
+    same_height = inter / shorter >= 0.5
+    if polarity is not None:  # an edge never matches one of the opposite brightness step along the wall
+        lp = np.array([[lm.polarity for lm in lms]])
+        cp = np.array([[polarity[cd.pair]] for cd in candidates])
+        same_height &= (lp * cp) >= 0
+    best = None
+    for i in range(len(c)):
+        for j in range(len(a)):
+            delta = a[j] - c[i]
+            if abs(delta) > 3.0 * np.sqrt(sb**2 + var_a[j]):
+                continue
+            resid = (c[:, None] + delta) - a[None, :]
+            # a feature's own error against its landmark's: the landmark's spread beyond the shared offset
+            # is not known apart from var_a, so allow the candidate's σ_f and a few mm of the landmark's
+            scale = tol * np.sqrt(sf[:, None] ** 2 + np.minimum(var_a[None, :], (2 * sf[:, None]) ** 2) + 1e-6)
+            ok = (np.abs(resid) <= scale) & same_height
+            # most features matched; then the likeliest offset and residuals
+            prior = delta**2 / (sb**2 + float(np.mean(var_a)))
+            score = (int(ok.any(axis=1).sum()), -prior - float(np.sum(np.where(ok, (resid / scale) ** 2, 0.0))))
+            if best is None or score > best[0]:
+                best = (score, delta, resid, ok)
+    if best is None:
+        return []
+    _, delta, resid, ok = best
+    big = 1e6
+    rows, cols = linear_sum_assignment(np.where(ok, resid**2, big))
+    return [(int(lms[j].id), int(candidates[i].pair)) for i, j in zip(rows, cols, strict=True) if ok[i, j]]
+
+
+def height_cost(ekf: JointEKF, pairs, pan: float, weight: float = 9.0) -> np.ndarray:
+    """(n_landmarks, n_pairs) association cost from the vertical extents: ``weight·(1 − IoU)`` of a pair's
+    rows and the rows of the landmark's ends at its predicted depth (clipped to the image). Lines of other
+    heights or lengths cost up to ``weight`` more: regularly spaced features are told apart by their extents
+    when the pose error alone cannot (a whole group matched one feature over is jointly compatible)."""
+    ids = ekf.landmark_ids
+    cost = np.zeros((len(ids), len(pairs)))
+    if not ids or not len(pairs):
+        return cost
+    cam = ekf.camera
+    pred = ekf.predict_observation(ids, pan)
+    d = pred.uv[:, 0] - pred.uv[:, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        Z = cam.f * cam.baseline / d
+    for j, i in enumerate(ids):
+        lm = ekf.landmark(i)
+        if lm.z_low is None or lm.z_high is None or not np.isfinite(Z[j]) or Z[j] <= 0:
+            continue
+        vt = np.clip(cam.cv + cam.f * (cam.mount_height - lm.z_high) / Z[j], 0.0, cam.height - 1.0)
+        vb = np.clip(cam.cv + cam.f * (cam.mount_height - lm.z_low) / Z[j], 0.0, cam.height - 1.0)
+        inter = np.clip(np.minimum(vb, pairs.v_bottom) - np.maximum(vt, pairs.v_top), 0.0, None)
+        union = np.maximum(np.maximum(vb, pairs.v_bottom) - np.minimum(vt, pairs.v_top), 1.0)
+        cost[j] = weight * (1.0 - inter / union)
+    return cost
+
+
+def wall_polarity(polarity, plane, centre):
+    """Image polarity (+1: brighter to the right in the left image) → polarity along the wall (+1: brighter
+    towards ``p2``), for a camera centre ``centre`` (2,) [m]. ``p1 → p2`` runs left to right in the image when
+    the camera is on the wall's right side (opposite its normal); from the other face the sign flips. A
+    painted edge keeps its polarity along the wall from both faces of a partition."""
+    side = float(plane.normal @ (np.asarray(centre, dtype=float) - plane.P1))
+    return np.asarray(polarity, dtype=int) * (1 if side < 0 else -1)
+
+
+def polarity_cost(ekf: JointEKF, polarity: np.ndarray, centre, cost: float = np.inf) -> np.ndarray:
+    """(n_landmarks, n_pairs): ``cost`` (default: forbidden) where a wall landmark's polarity along its wall
+    and a pair's, seen from ``centre``, are known and differ; else 0."""
+    out = np.zeros((ekf.n_landmarks, len(polarity)))
+    for r, i in enumerate(ekf.landmark_ids):
+        lm = ekf.landmark(i)
+        if lm.kind == "wall" and lm.polarity:
+            pair_pol = wall_polarity(polarity, ekf.landmark_plane(i), centre)
+            out[r] = np.where(lm.polarity * pair_pol < 0, cost, 0.0)
+    return out
+
+
+def is_duplicate(ekf: JointEKF, c) -> bool:
+    """Whether a wall landmark on the same plane (measured from either edge) already explains candidate
+    ``c``: their positions along the wall agree within 3σ."""
+    for i in ekf.landmark_ids:
+        lm = ekf.landmark(i)
+        if lm.kind != "wall" or lm.plane_id != c.plane_id:
+            continue
+        gap = float(np.linalg.norm(lm.position - c.P))
+        if gap <= 3.0 * np.sqrt(float(lm.cov[0, 0]) + c.sigma_s**2):
+            return True
+    return False

@@ -1,0 +1,313 @@
+"""The step-by-step localizer: one stereo frame in, the pose estimate out (paper Secs 2–5).
+
+::
+
+    import stablemarks as sm
+    seq = sm.open_sequence("results/lab-seq")
+    loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=sm.Config())
+    for frame in seq:
+        est = loc.step(frame.stamp, frame.left, frame.right, odometry=frame.odometry, pan=frame.pan)
+        print(est.pose, est.cov, est.pan_command, est.health)
+    loc.save_landmarks("landmarks.yaml")
+
+Each :meth:`Localizer.step` predicts with the odometry since the last frame (Eq 19), runs the stereo
+front end (Secs 2.1–2.2), models the frame's features on the reference planes in view (Secs 2.3–4),
+associates and updates the joint EKF with the re-observed landmarks (Sec 5, Eq 20) and enters the new
+stable ones. What it does is decided by the method, a strategy object (:mod:`stablemarks.methods`).
+
+Frames and units: poses ``(x [m], y [m], theta [rad])`` in the map frame; odometry poses in the odometry
+frame (only their differences are used); pans [rad] relative to the robot's heading; stamps [s].
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .config import Config
+from .errors import InputError, expected
+from .estimation import JointEKF, LandmarkEstimate
+from .geometry import SE2, StereoCamera
+from .maps import Map
+from .methods import Entered, Method, method_named
+from .motion import choose_pan
+from .pipeline import FrameLandmarks, FrontEnd, check_pair, run_front_end
+
+DEFAULT_START_COV = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
+"""Covariance of the start pose when none is given: σ = 5 cm, 5 cm, 1° over ``(x, y, theta)``."""
+
+
+@dataclass(kw_only=True)
+class FrameRecord:
+    """What happened in one frame (one line of ``log.jsonl``).
+
+    Poses are ``(x [m], y [m], theta [rad])`` in the map frame, covariances over them; ids are landmark ids.
+    """
+
+    index: int
+    """Frame number from 0."""
+    stamp: float
+    """Time [s]."""
+    pan: float
+    """The pan the frame was taken with [rad]."""
+    pan_command: float
+    """The pan the method asks for next [rad]."""
+    pose: np.ndarray
+    """(3,) the estimate after the frame."""
+    cov_pose: np.ndarray
+    """(3, 3) its covariance."""
+    dead_reckoning: np.ndarray
+    """(3,) odometry alone from the start pose."""
+    true_pose: np.ndarray | None = None
+    """(3,) the true pose when the source knows it."""
+    observed: list[int] = field(default_factory=list)
+    """Landmarks that updated the filter."""
+    nis: list[float] = field(default_factory=list)
+    """Their normalised innovations squared (2 dof each)."""
+    associated: list[int] = field(default_factory=list)
+    """Landmarks associated with a segment pair (a superset of ``observed``)."""
+    new: list[int] = field(default_factory=list)
+    """Landmarks entered in this frame."""
+    n_landmarks: int = 0
+    n_pairs: int = 0
+    """Segment pairs kept by the disparity filter."""
+    n_candidates: int = 0
+    n_selected: int = 0
+    warnings: list[str] = field(default_factory=list)
+    """Plain sentences about this frame (a plane not found, no free edge in view)."""
+    health: list[str] = field(default_factory=list)
+    """Warnings about the filter's state (empty when all is well)."""
+    timings: dict[str, float] = field(default_factory=dict)
+    """Wall time of each stage [s]."""
+    odometry: np.ndarray | None = None
+    """The odometry increment ``U`` (3,) that led to this frame (None for the first), in the robot frame."""
+    cov_odometry: np.ndarray | None = None
+    """Its covariance (3, 3)."""
+    measurements: list[tuple[int, float, float]] = field(default_factory=list)
+    """The update's observations: ``(landmark id, u_l, u_r)`` [px], each with noise ``noise.sigma_img``."""
+    landmark_priors: list[tuple[list[int], list[float], np.ndarray]] = field(default_factory=list)
+    """Landmarks entered in this frame, in groups: ``(ids, initial state values, joint covariance)``; the
+    cross-covariance with the pose is zero for wall landmarks (DESIGN §4)."""
+
+    def to_dict(self) -> dict:
+        """JSON-ready: arrays as lists."""
+        def plain(v):
+            return None if v is None else np.asarray(v).tolist()
+
+        return {
+            "index": self.index, "stamp": self.stamp, "pan": self.pan, "pan_command": self.pan_command,
+            "pose": plain(self.pose), "cov_pose": plain(self.cov_pose), "dead_reckoning": plain(self.dead_reckoning),
+            "true_pose": plain(self.true_pose), "observed": self.observed, "nis": self.nis,
+            "associated": self.associated, "new": self.new, "n_landmarks": self.n_landmarks,
+            "n_pairs": self.n_pairs, "n_candidates": self.n_candidates, "n_selected": self.n_selected,
+            "warnings": self.warnings, "health": self.health, "timings": self.timings,
+            "odometry": plain(self.odometry), "cov_odometry": plain(self.cov_odometry),
+            "measurements": [list(m) for m in self.measurements],
+            "landmark_priors": [{"ids": ids, "values": vals, "cov": np.asarray(cov).tolist()}
+                                for ids, vals, cov in self.landmark_priors],
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """The result of one :meth:`Localizer.step`.
+
+    Attributes
+    ----------
+    stamp : the frame's time [s].
+    pose : (3,) ``(x [m], y [m], theta [rad])`` of the robot in the map after the frame.
+    cov : (3, 3) its covariance over ``(x, y, theta)`` [m², m², rad²].
+    pan_command : the head pan [rad] the method asks for next (the pan policy's choice from this estimate).
+    health : warnings about the filter's state, empty when all is well.
+    record : everything the frame did (:class:`FrameRecord`), for logs.
+    front : the stereo front end's output (None for ``dead_reckoning``).
+    model : the frame's landmark model on the reference planes (None where the method has none).
+    entered : the landmarks entered in this frame and the candidates they came from.
+    """
+
+    stamp: float
+    pose: np.ndarray
+    cov: np.ndarray
+    pan_command: float
+    health: list[str]
+    record: FrameRecord
+    front: FrontEnd | None = None
+    model: FrameLandmarks | None = None
+    entered: Entered = field(default_factory=Entered)
+
+
+def landmark_map_document(ekf: JointEKF, method: str = "stablemarks") -> dict:
+    """The landmarks of ``ekf`` as a plain document (``landmarks.yaml``, loadable as ``prior_landmarks``):
+    ``frame``, ``units``, ``method``, ``landmarks`` (wall landmarks as the distance ``s`` along their wall from
+    the free edge ``edge`` with ``var_s``, plus the 2-D ``position`` and rank-1 ``cov2d``) and
+    ``cov_landmarks``, their joint covariance in state order."""
+    doc = {"frame": "map", "units": "metres; s is the distance along the wall from its free edge `edge`; var_s in m²",
+           "method": method, **ekf.to_dict(joint=True)}
+    doc.pop("pose", None)
+    doc.pop("cov_pose", None)
+    return doc
+
+
+class Localizer:
+    """On-line landmark selection and EKF localization, one frame at a time.
+
+    Parameters
+    ----------
+    world_map : the map of walls (reference planes).
+    camera : the rectified stereo head on its mount, pan 0 (its ``sigma_img`` is replaced by the
+        configuration's ``noise.sigma_img``).
+    start_pose : (3,) the robot's start in the map; default the origin.
+    start_cov : (3, 3) its covariance; default σ = 5 cm, 5 cm, 1° (:data:`DEFAULT_START_COV`).
+    config : every setting (:class:`stablemarks.Config`).
+    method : ``stablemarks`` (default), ``plane_no_selection``, ``all_segments`` or ``dead_reckoning``
+        (:mod:`stablemarks.methods`), or a :class:`~stablemarks.methods.Method` object.
+    prior_landmarks : a landmark map saved by an earlier run (the document of ``landmarks.yaml``).
+    """
+
+    def __init__(self, world_map: Map, camera: StereoCamera, *, start_pose=None, start_cov=None,
+                 config: Config | None = None, method: str | Method = "stablemarks", prior_landmarks=None):
+        self.config = config if config is not None else Config()
+        self.world_map = world_map
+        self.camera = self.config.camera(camera)
+        self.method = method if isinstance(method, Method) else method_named(method)
+        start = np.zeros(3) if start_pose is None else (
+            start_pose.as_array() if isinstance(start_pose, SE2) else np.asarray(start_pose, dtype=float))
+        if start.shape != (3,) or not np.all(np.isfinite(start)):
+            raise InputError(expected("a finite pose (x, y, theta)", start_pose, where="start_pose"))
+        self.start_cov = DEFAULT_START_COV.copy() if start_cov is None else np.asarray(start_cov, dtype=float)
+        self.ekf = JointEKF(self.camera, start, self.start_cov, self.config.ekf)
+        if prior_landmarks is not None:
+            self.ekf.load_prior_landmarks(prior_landmarks, world_map)
+        self._dead_reckoning = SE2.from_array(start)
+        self._odometry: SE2 | None = None
+        self._pan: float | None = None
+        self._index = 0
+
+    # ----------------------------------------------------------------- state
+    @property
+    def pose(self) -> np.ndarray:
+        """(3,) the current estimate ``(x [m], y [m], theta [rad])`` in the map."""
+        return self.ekf.pose
+
+    @property
+    def cov(self) -> np.ndarray:
+        """(3, 3) its covariance."""
+        return self.ekf.cov_pose
+
+    @property
+    def frames(self) -> int:
+        """How many frames have been stepped."""
+        return self._index
+
+    def landmarks(self) -> list[LandmarkEstimate]:
+        """The landmark map: every landmark of the filter, in state order (positions in the map frame)."""
+        return [self.ekf.landmark(i) for i in self.ekf.landmark_ids]
+
+    def landmarks_document(self) -> dict:
+        """The landmark map as ``landmarks.yaml`` holds it (:func:`landmark_map_document`)."""
+        return landmark_map_document(self.ekf, self.method.name)
+
+    def save_landmarks(self, path: str | Path) -> Path:
+        """Write :meth:`landmarks_document` as YAML to ``path`` (atomically: a temporary file, then renamed)."""
+        import os
+
+        import yaml
+
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(yaml.safe_dump(self.landmarks_document(), sort_keys=False))
+        os.replace(tmp, path)
+        return path
+
+    # ----------------------------------------------------------------- steps
+    def _increment(self, odometry) -> tuple[SE2 | None, np.ndarray | None]:
+        if odometry is None:
+            return None, None
+        pose = SE2.from_array(np.asarray(odometry, dtype=float))
+        if self._odometry is None:
+            return pose, None
+        return pose, self._odometry.between(pose).as_array()
+
+    def command_pan(self, odometry=None) -> float:
+        """The pan [rad] the pan policy (``config.pan``) chooses for a frame taken at the wheel-odometry pose
+        ``odometry`` (3,): from the current estimate moved by the odometry since the last frame (or from the
+        current estimate when ``odometry`` is None)."""
+        from .estimation import motion
+
+        X = self.ekf.pose
+        _, U = self._increment(odometry)
+        if U is not None:
+            X = motion(X, U)
+        return choose_pan(self.config.pan, self.world_map, self.camera, X, self._pan)
+
+    def step(self, stamp: float, left: np.ndarray, right: np.ndarray, *, odometry=None, pan: float = 0.0
+             ) -> Estimate:
+        """Process one rectified stereo pair.
+
+        Parameters
+        ----------
+        stamp : time [s].
+        left, right : (H, W) ``uint8`` rectified grayscale images, left camera the reference.
+        odometry : (3,) wheel-odometry pose ``(x [m], y [m], theta [rad])`` at ``stamp``; the increment since
+            the previous frame predicts the pose (Eq 19) with the noise model ``config.odometry``. None: no
+            odometry (the pose is predicted not to move).
+        pan : the head's pan when the pair was taken [rad].
+        """
+        t0 = time.perf_counter()
+        k = self._index
+        pan = float(pan)
+        odo_pose, U = self._increment(odometry)
+        cov_U = None
+        if U is not None:
+            cov_U = self.config.odometry.covariance(SE2.from_array(U))
+            self.ekf.predict(U, cov_U)
+            self._dead_reckoning = self._dead_reckoning @ SE2.from_array(U)
+        if odo_pose is not None:
+            self._odometry = odo_pose
+        t1 = time.perf_counter()
+        timings = {"predict": t1 - t0}
+        record = FrameRecord(index=k, stamp=float(stamp), pan=pan, pan_command=pan, pose=self.ekf.pose,
+                             cov_pose=self.ekf.cov_pose, dead_reckoning=self._dead_reckoning.as_array(),
+                             odometry=U, cov_odometry=cov_U)
+        front = model = None
+        entered = Entered()
+        method = self.method
+        if method.uses_vision:
+            check_pair(np.asarray(left), np.asarray(right))
+            front = run_front_end(left, right, self.config)
+            timings.update(front.timings)
+            t2 = time.perf_counter()
+            cam_k = self.camera.with_pan(pan)
+            model = method.model(front, cam_k, self.world_map, self.ekf.pose, self.ekf.cov_pose, self.config)
+            if model is not None:
+                record.warnings, record.n_candidates = list(model.warnings), len(model.candidates)
+                record.n_selected = len(model.selected)
+            record.n_pairs = len(front.kept_pairs)
+            assoc = method.associate(self.ekf, front, model, pan, cam_k)
+            record.associated = [int(i) for i, _ in assoc]
+            chosen = self.ekf.select_for_update(assoc, pan)
+            if chosen:
+                pairs = front.kept_pairs
+                measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+                res = self.ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k)
+                record.measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen]
+                record.observed = [int(i) for i in res.ids]
+                record.nis = [float(v) for v in res.nis]
+            t3 = time.perf_counter()
+            timings["associate_update"] = t3 - t2
+            entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
+                                   self.config)
+            record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
+            timings["select"] = time.perf_counter() - t3
+        self._pan = pan
+        self._index += 1
+        record.pose, record.cov_pose = self.ekf.pose, self.ekf.cov_pose
+        record.n_landmarks = self.ekf.n_landmarks
+        record.pan_command = self.command_pan()
+        timings["total"] = time.perf_counter() - t0
+        record.timings = timings
+        return Estimate(record.stamp, record.pose, record.cov_pose, record.pan_command, list(record.health), record,
+                        front, model, entered)

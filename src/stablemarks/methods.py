@@ -1,0 +1,176 @@
+"""The methods the localizer can run, one strategy object each (the evaluation compares them):
+
+=======================  ==========================================================================
+``stablemarks``          the full method: plane-constrained landmarks that pass the selection rules
+``plane_no_selection``   plane-constrained landmarks, every candidate (no selection rules)
+``all_segments``         every kept segment pair as a 2-D point landmark (classic stereo EKF-SLAM)
+``dead_reckoning``       odometry only
+=======================  ==========================================================================
+
+A method answers three questions for one frame: what the frame's own landmark model is (:meth:`Method.model`,
+Secs 2.3–4), which measurements are which landmarks (:meth:`Method.associate`, Sec 5) and which new
+landmarks enter the filter (:meth:`Method.enter`). The loop that calls them is
+:meth:`stablemarks.localizer.Localizer.step`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import Config
+from .errors import InputError, expected
+from .estimation import JointEKF, NewLandmark, associate_frame, is_duplicate, wall_polarity
+from .geometry import StereoCamera
+from .landmarks import Candidate
+from .maps import Map
+from .pipeline import FrameLandmarks, FrontEnd, select_landmarks
+
+
+@dataclass
+class Entered:
+    """What :meth:`Method.enter` put into the filter in one frame.
+
+    ``ids`` the new landmark ids in order; ``candidates`` the wall candidate each came from (None for point
+    landmarks); ``priors`` the groups ``(ids, initial values, joint covariance)`` they entered with (wall
+    landmarks; the cross-covariance with the pose is zero, DESIGN §4).
+    """
+
+    ids: list[int] = field(default_factory=list)
+    candidates: list[Candidate | None] = field(default_factory=list)
+    priors: list[tuple[list[int], list[float], np.ndarray]] = field(default_factory=list)
+
+
+class Method:
+    """Base strategy: the full method's behaviour; subclasses change one decision each."""
+
+    name = "stablemarks"
+    uses_vision = True
+    models_planes = True
+
+    def model(self, front: FrontEnd, camera: StereoCamera, world_map: Map, X, cov_X,
+              config: Config) -> FrameLandmarks | None:
+        """The frame's own landmark model on the reference planes (Secs 2.3–4), from the prior belief."""
+        return select_landmarks(front, camera, world_map, X, cov_X, config)
+
+    def associate(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, pan: float,
+                  camera: StereoCamera) -> list[tuple[int, int]]:
+        """``(landmark id, kept-pair index)`` of this frame (:func:`~stablemarks.estimation.associate_frame`)."""
+        pairs = front.kept_pairs
+        if not ekf.n_landmarks or not len(pairs):
+            return []
+        measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+        polarity = front.left_segments.polarity[pairs.left_index]
+        centre = camera.optical_centres(ekf.pose)[0]
+        return associate_frame(ekf, pairs, measured, pan, model, polarity, centre)
+
+    def take(self, model: FrameLandmarks) -> list[Candidate]:
+        """The candidates this method enters as landmarks."""
+        return model.selected
+
+    def enter(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, used_pairs: set[int],
+              camera: StereoCamera, world_map: Map, frame: int, config: Config) -> Entered:
+        """Enter the frame's new wall landmarks, jointly per boundary (:func:`enter_wall_landmarks`)."""
+        fresh = [c for c in self.take(model) if c.pair not in used_pairs and not is_duplicate(ekf, c)]
+        pairs = front.kept_pairs
+        polarity = front.left_segments.polarity[pairs.left_index]
+        centre = camera.optical_centres(ekf.pose)[0]
+        along = {c.pair: int(wall_polarity(int(polarity[c.pair]), world_map[c.plane_id], centre)) for c in fresh}
+        return enter_wall_landmarks(ekf, world_map, fresh, frame, along, config.landmarks.filter_boundary_sigma)
+
+
+class PlaneNoSelection(Method):
+    """Plane-constrained landmarks without the selection rules: every candidate enters."""
+
+    name = "plane_no_selection"
+
+    def take(self, model: FrameLandmarks) -> list[Candidate]:
+        return model.candidates
+
+
+class AllSegments(Method):
+    """Every kept segment pair becomes a 2-D point landmark (no planes, no selection)."""
+
+    name = "all_segments"
+    models_planes = False
+
+    def model(self, front, camera, world_map, X, cov_X, config) -> None:
+        return None
+
+    def enter(self, ekf, front, model, used_pairs, camera, world_map, frame, config) -> Entered:
+        pairs = front.kept_pairs
+        idx = [j for j in range(len(pairs)) if j not in used_pairs]
+        ids = enter_point_landmarks(ekf, camera, pairs, idx, frame)
+        return Entered(ids, [None] * len(ids))
+
+
+class DeadReckoning(Method):
+    """Odometry only: no image is looked at."""
+
+    name = "dead_reckoning"
+    uses_vision = False
+    models_planes = False
+
+
+METHODS: dict[str, type[Method]] = {m.name: m for m in (Method, PlaneNoSelection, AllSegments, DeadReckoning)}
+"""The methods by name, in the evaluation's order."""
+
+
+def method_named(name: str) -> Method:
+    """A new strategy object for ``name`` (one of :data:`METHODS`)."""
+    if name not in METHODS:
+        raise InputError(expected(f"one of {', '.join(METHODS)}", name, where="method"))
+    return METHODS[name]()
+
+
+# ------------------------------------------------------------------ entering landmarks
+def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
+                         polarity: dict[int, int] | None = None, boundary_sigma: str = "model") -> Entered:
+    """Enter candidates as wall landmarks, jointly per boundary: ``Σ = σ_b² 11ᵀ + diag(σ_f²)`` (DESIGN §4).
+
+    ``polarity`` maps a candidate's pair index to its edge's polarity along the wall
+    (:func:`~stablemarks.estimation.wall_polarity`); ``boundary_sigma``: which σ_b
+    (``landmarks.filter_boundary_sigma``). Returns what entered, group by group.
+    """
+    polarity = polarity or {}
+    out = Entered()
+    groups: dict[tuple[str, str], list] = {}
+    for c in candidates:
+        groups.setdefault((c.plane_id, c.edge), []).append(c)
+    for (plane_id, edge), group in groups.items():
+        plane = world_map[plane_id]
+        sb = group[0].sigma_b
+        if boundary_sigma == "measured" and np.isfinite(group[0].sigma_b_measured):
+            sb = group[0].sigma_b_measured
+        sf = np.array([c.sigma_f for c in group])
+        cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
+        new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
+        added = ekf.add_landmarks(new, cov, frame=frame)
+        out.priors.append((added, [float(c.s) for c in group], cov))
+        out.ids += added
+        out.candidates += group
+    return out
+
+
+def enter_point_landmarks(ekf: JointEKF, camera: StereoCamera, pairs, idx, frame: int) -> list[int]:
+    """Classic stereo EKF-SLAM initialisation of 2-D point landmarks: ``p = g(X, z)`` with
+    ``Σ_pp = G_X P_XX G_Xᵀ + G_z R G_zᵀ`` (points triangulated from one pose share its error) and
+    ``Σ_Xp = P_XX G_Xᵀ``."""
+    X = ekf.pose
+    new, cov_z, J_X = [], [], []
+    for k in idx:
+        p, cov = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
+        if not np.all(np.isfinite(p)):
+            continue
+        Xc, Zc = camera.to_camera(X, p)
+        new.append(NewLandmark.point(p))
+        cov_z.append(cov)
+        J_X.append(camera.triangulation_jacobian_pose(X, Xc, Zc))
+    if not new:
+        return []
+    G = np.concatenate(J_X, axis=0)  # (2n, 3)
+    C = G @ ekf.cov_pose @ G.T
+    for i, cz in enumerate(cov_z):
+        C[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] += cz
+    return ekf.add_landmarks(new, C, cov_pose_new=ekf.cov_pose @ G.T, frame=frame)

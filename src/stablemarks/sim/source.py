@@ -1,0 +1,72 @@
+"""A simulated run as a frame source (:class:`~stablemarks.frames.FrameSource`), rendered frame by frame.
+
+The robot's head follows the localizer's pan commands (the source is steerable): before rendering frame
+``k`` it asks ``pan_for(odometry_k)`` — the pan the method wants at the odometry pose of that frame. Without
+a command the run's own pans are used (the scenario's policy applied to dead reckoning, as
+``stablemarks simulate`` records them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Iterator
+
+import numpy as np
+
+from ..frames import Frame
+from .render import Renderer, renderer_for
+from .run import Run
+
+
+class SimulatedSource:
+    """The frames of a simulated :class:`~stablemarks.sim.run.Run`, rendered on demand.
+
+    ``stamp_step`` [s] between frames. ``initial_pose`` is the true start; ``config_defaults`` carries the
+    scenario's odometry noise and pan policy for the localizer's configuration.
+    """
+
+    def __init__(self, run: Run, renderer: Renderer | None = None, stamp_step: float = 0.5, frames: int | None = None):
+        self.run = run
+        self.scenario = run.scenario
+        self.name = run.scenario.name
+        self.camera = run.scenario.camera
+        self.world_map = run.scenario.map
+        self.initial_pose = run.poses[0].as_array()
+        self.renderer = renderer or renderer_for(run.scenario)
+        self.stamp_step = stamp_step
+        self.notes: list[str] = []
+        self._n = len(run) if frames is None else min(int(frames), len(run))
+        self._pan_for: Callable[[np.ndarray], float] | None = None
+        plan = self.scenario.robot.pan
+        lo, hi = self.scenario.pan_limits
+        self.config_defaults = {
+            "odometry": dataclasses.asdict(self.scenario.robot.odometry),
+            "pan": {"policy": "fixed" if plan.policy == "fixed" else "free_edges",
+                    "angle_deg": math.degrees(plan.angle), "limits_deg": [math.degrees(lo), math.degrees(hi)]},
+        }
+
+    def __len__(self) -> int:
+        return self._n
+
+    def steer(self, pan_for: Callable[[np.ndarray], float] | None) -> None:
+        """Take each frame's pan from ``pan_for(odometry pose)`` (None: the run's recorded pans)."""
+        self._pan_for = pan_for
+
+    def frame(self, k: int, pan: float | None = None) -> Frame:
+        """Frame ``k`` rendered with ``pan`` (default: the run's pan of that frame)."""
+        odometry = self.run.dead_reckoning[k].as_array()
+        pan = float(self.run.pans[k] if pan is None else pan)
+        sim = self.renderer.render(self.run.poses[k].as_array(), pan, self.run.frame_rng(k))
+        return Frame(k, k * self.stamp_step, sim.left, sim.right, odometry, pan,
+                     true_pose=self.run.poses[k].as_array(), truth=sim.truth)
+
+    def __iter__(self) -> Iterator[Frame]:
+        for k in range(len(self)):
+            pan = None
+            if self._pan_for is not None:
+                pan = self._pan_for(self.run.dead_reckoning[k].as_array())
+            yield self.frame(k, pan)
+
+    def close(self) -> None:
+        """Nothing to release."""

@@ -1,0 +1,116 @@
+"""The public streaming API: ``sm.open_sequence`` + ``sm.Localizer.step``, equal to ``stablemarks run``."""
+
+import numpy as np
+import pytest
+import yaml
+
+import stablemarks as sm
+from stablemarks.cli import main
+from stablemarks.frames import Frame, FrameSource, SteerableSource
+from stablemarks.io.trajectory import read_tum
+from stablemarks.sim.export import write_simulated_sequence
+from stablemarks.sim.run import simulate_run
+from stablemarks.sim.source import SimulatedSource
+
+N = 6
+
+
+@pytest.fixture(scope="module")
+def lab_seq(tmp_path_factory, lab_scenario):
+    return write_simulated_sequence(simulate_run(lab_scenario, seed=7), tmp_path_factory.mktemp("seq") / "lab",
+                                    n_frames=N)
+
+
+def loop(seq, **kw):
+    loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=sm.Config(), **kw)
+    estimates = []
+    for frame in seq:
+        est = loc.step(frame.stamp, frame.left, frame.right, odometry=frame.odometry, pan=frame.pan)
+        estimates.append(est)
+    return loc, estimates
+
+
+def test_the_readme_loop_gives_the_trajectory_of_stablemarks_run(lab_seq, tmp_path):
+    seq = sm.open_sequence(lab_seq)
+    assert isinstance(seq, FrameSource) and len(seq) == N
+    loc, estimates = loop(seq)
+    assert main(["run", str(lab_seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    stamps, poses = read_tum(tmp_path / "out" / "trajectory.tum")
+    np.testing.assert_allclose(stamps, [e.stamp for e in estimates], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(poses, [e.pose for e in estimates], rtol=0, atol=1e-9)
+    log = [yaml.safe_load(line) for line in (tmp_path / "out" / "log.jsonl").read_text().splitlines()]
+    np.testing.assert_allclose([r["cov_pose"] for r in log], [e.cov for e in estimates], rtol=0, atol=1e-12)
+    assert [r["pan_command"] for r in log] == pytest.approx([e.pan_command for e in estimates], abs=1e-12)
+    assert loc.frames == N and len(loc.landmarks()) == len(yaml.safe_load(
+        (tmp_path / "out" / "landmarks.yaml").read_text())["landmarks"])
+
+
+def test_frames_and_estimates_have_the_documented_fields(lab_seq):
+    seq = sm.open_sequence(lab_seq)
+    frame = next(iter(seq))
+    assert isinstance(frame, Frame)
+    assert frame.left.dtype == np.uint8 and frame.left.shape == (480, 640) == frame.right.shape
+    assert frame.odometry.shape == (3,) and isinstance(frame.stamp, float) and isinstance(frame.pan, float)
+    _, estimates = loop(seq)
+    est = estimates[-1]
+    assert est.pose.shape == (3,) and est.cov.shape == (3, 3)
+    np.testing.assert_allclose(est.cov, est.cov.T, atol=0)
+    assert np.all(np.linalg.eigvalsh(est.cov) > 0)
+    assert isinstance(est.health, list) and isinstance(est.pan_command, float)
+    assert -np.pi / 2 <= est.pan_command <= np.pi / 2
+    assert est.record.index == N - 1 and est.record.n_landmarks == len(est.record.new) + sum(
+        len(e.record.new) for e in estimates[:-1])
+
+
+def test_a_sequence_without_an_initial_pose_starts_at_the_origin(lab_seq, tmp_path):
+    text = (lab_seq / "sequence.yaml").read_text()
+    doc = yaml.safe_load(text)
+    doc.pop("initial_pose")
+    (lab_seq / "sequence.yaml").write_text(yaml.safe_dump(doc))
+    try:
+        seq = sm.open_sequence(lab_seq)
+        assert seq.initial_pose is None
+        loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose)
+        np.testing.assert_array_equal(loc.pose, np.zeros(3))
+    finally:
+        (lab_seq / "sequence.yaml").write_text(text)
+
+
+def test_saved_landmarks_start_a_later_localizer(lab_seq, tmp_path):
+    seq = sm.open_sequence(lab_seq)
+    loc, _ = loop(seq)
+    path = loc.save_landmarks(tmp_path / "landmarks.yaml")
+    again, estimates = loop(seq, prior_landmarks=yaml.safe_load(path.read_text()))
+    assert estimates[0].record.observed  # the prior landmarks are seen in the first frame
+    assert {lm.id for lm in loc.landmarks()} <= {lm.id for lm in again.landmarks()}
+
+
+def test_step_without_odometry_predicts_no_motion(lab_scenario):
+    run = simulate_run(lab_scenario, seed=3)
+    source = SimulatedSource(run, frames=2)
+    loc = sm.Localizer(source.world_map, source.camera, start_pose=source.initial_pose, method="dead_reckoning")
+    for frame in source:
+        est = loc.step(frame.stamp, frame.left, frame.right, pan=frame.pan)
+    np.testing.assert_array_equal(est.pose, source.initial_pose)
+    assert est.record.odometry is None
+
+
+def test_the_simulator_is_steered_by_the_localizer(lab_scenario):
+    run = simulate_run(lab_scenario, seed=3)
+    source = SimulatedSource(run, frames=3)
+    assert isinstance(source, SteerableSource)
+    result = sm.run_online(source, config=sm.Config().with_source_defaults(source.config_defaults))
+    pans = [r.pan for r in result.records]
+    commands = [r.pan_command for r in result.records]
+    assert pans[1:] != list(run.pans[1:3])  # the closed loop looks from the estimate, not dead reckoning
+    assert all(abs(p - c) < 0.1 for p, c in zip(pans[1:], commands[:-1], strict=True))
+
+
+def test_bad_inputs_to_the_localizer(lab_scenario):
+    with pytest.raises(sm.StablemarksError, match="start_pose: expected a finite pose"):
+        sm.Localizer(lab_scenario.map, lab_scenario.camera, start_pose=[0, 0])
+    with pytest.raises(sm.StablemarksError, match="method: expected one of stablemarks"):
+        sm.Localizer(lab_scenario.map, lab_scenario.camera, method="magic")
+    loc = sm.Localizer(lab_scenario.map, lab_scenario.camera)
+    with pytest.raises(sm.StablemarksError, match="stereo pair"):
+        loc.step(0.0, np.zeros((10, 10), np.uint8), np.zeros((10, 12), np.uint8))

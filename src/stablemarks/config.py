@@ -65,10 +65,18 @@ class NoiseConfig:
     the plane prediction gates and fit (Eqs 4–10), the boundary and feature model (Eqs 12–17) and the
     filter's observation noise (Eq 20)."""
 
+    boundary_px: float | None = None
+    """σ of a planar region's border in the disparity images [px]: where block matching puts a depth edge
+    (Sec 3.2's boundary), shared by both images. None: a uniform allowance over the SAD window,
+    ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which reproduces Table 1's σ)."""
+
     def __post_init__(self) -> None:
         v = self.sigma_img
         if isinstance(v, bool) or not isinstance(v, int | float) or not (v == v and 0 < v < 1e3):
             raise ConfigError(expected("a positive number of pixels below 1000", v, where="noise.sigma_img"))
+        v = self.boundary_px
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float) or not (v == v and 0 <= v < 1e3)):
+            raise ConfigError(expected("null or a number of pixels in [0, 1000)", v, where="noise.boundary_px"))
 
 
 DERIVED = {
@@ -111,6 +119,14 @@ class Config:
             if value != getattr(self, name):
                 object.__setattr__(self, name, value)
 
+    @classmethod
+    def preset(cls, name: str) -> Config:
+        """A named preset (:data:`PRESETS`): ``paper`` holds the paper's noise values (σ_img = 0.5 px, the
+        boundary's SAD-window allowance), with which Table 1 is reproduced."""
+        if name not in PRESETS:
+            raise ConfigError(expected(f"one of {', '.join(PRESETS)}", name, where="preset"))
+        return parse_config(PRESETS[name], f"preset {name}")
+
     def camera(self, camera: StereoCamera) -> StereoCamera:
         """``camera`` with this configuration's line-column noise ``noise.sigma_img`` (the one home of σ_img:
         every stage reads it from the camera it is handed)."""
@@ -143,6 +159,14 @@ class Config:
     def with_overrides(self, overrides: dict, source: str = "config") -> Config:
         """A copy with ``{section: {key: value}}`` applied, validated like a file."""
         return parse_config(overrides, source, base=self)
+
+
+PRESETS = {
+    "paper": {"noise": {"sigma_img": 0.5, "boundary_px": None}},
+}
+"""Named configurations: ``paper`` — the paper's σ_img = 0.5 px (Sec 2.3.1) and a boundary known to within the
+SAD window (``w / sqrt(12)``), which reproduce Table 1's σ; the defaults are measured instead
+(``stablemarks calibrate-noise``)."""
 
 
 def parse_config(data: object, source: str = "config", base: Config | None = None) -> Config:

@@ -37,6 +37,10 @@ REASON_NEAR_BOUNDARY = "near boundary"
 REASON_LENGTH = "low length similarity"
 REASON_OUTSIDE = "outside the plane"
 REASON_CONTRAST = "low contrast"
+REASON_OFF_WALL = "off the wall"
+REASON_HEIGHT = "beyond the wall's height"
+REASON_FAR = "too far"
+REASON_OBLIQUE = "too oblique"
 
 
 @dataclass(frozen=True)
@@ -52,6 +56,10 @@ class LandmarkConfig:
         if self.filter_boundary_sigma not in ("measured", "model"):
             raise InputError(expected("'measured' or 'model'", self.filter_boundary_sigma,
                                       where="landmarks.filter_boundary_sigma"))
+        for name in ("off_wall_sigma", "row_sigma_px", "max_range", "max_incidence_deg", "boundary_gate_sigma"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0):
+                raise InputError(expected("a positive number", v, where=f"landmarks.{name}"))
         if not (np.isfinite(self.min_contrast) and self.min_contrast >= 0):
             raise InputError(expected("a number of gray levels >= 0", self.min_contrast,
                                       where="landmarks.min_contrast"))
@@ -89,6 +97,24 @@ class LandmarkConfig:
     """Width [px] of the area-matching window. A SAD region's border is only known to within the window
     (block matching spreads a depth edge over it), so the boundary gets the variance of a uniform
     distribution over that width, ``w²/12``, shared by both images. ``None``: the SAD block size."""
+    off_wall_sigma: float = 3.0
+    """A candidate is on its wall only if its triangulated position agrees with the fitted plane (the
+    innovation of the point-on-plane update, Eqs 12–14) within this many σ; farther is "off the wall" (a
+    pole or a box corner standing in front of it). The smallest offset this resolves at range ``Z`` seen
+    frontally is about ``off_wall_sigma · sqrt(2) σ_img · Z² / (f b)``: 0.17 m at 4 m and 0.38 m at 6 m with
+    σ_img = 0.15 px, f = 500 px, b = 0.12 m (0.57 m and 1.27 m with the paper's 0.5 px)."""
+    row_sigma_px: float = 2.0
+    """σ of a segment's end row [px], for the height test: a candidate's ends must lie within the wall's
+    mapped ``z`` range widened by ``off_wall_sigma`` σ of their height (rows and depth); beyond it the line
+    belongs to something else (a pole standing in front of a whiteboard reaches the floor)."""
+    max_range: float = 10.0
+    """Candidates farther than this from the camera [m] are not entered ("too far")."""
+    max_incidence_deg: float = 70.0
+    """Candidates whose viewing ray meets the wall more than this far from its normal [deg] are not entered
+    ("too oblique"): a wall seen at a grazing angle stretches the SAD window over a wide stretch of wall."""
+    boundary_gate_sigma: float = 3.0
+    """A found boundary farther along the wall from the map's free edge than this many σ (its own σ and the
+    pose's, projected on the wall) disagrees with the map: nothing is modelled from it in that frame."""
     min_edge_step_sigma: float = 3.0
     """A free edge is searched only where the map puts something at a different depth just beyond it: the
     disparity step the map predicts across the edge must reach this many σ of the disparity noise
@@ -142,6 +168,12 @@ class Candidate:
     contrast : brightness step across the line in the left image [gray levels] (``inf`` when unknown).
     sigma_b_measured : the boundary's σ along the wall without the SAD window allowance [m] (see
         :attr:`LandmarkConfig.filter_boundary_sigma`).
+    wall_offset, sigma_wall_offset : the triangulated point's offset from the fitted plane along its normal
+        before the plane constraint (Eq 12's ``G``) and its σ (image noise and the fit) [m].
+    height_margin : how far [m] the segment's ends may reach beyond the wall's mapped height (``k`` σ of the
+        heights from the rows and the depth).
+    range : distance from the left optical centre [m]; ``incidence`` the angle between the viewing ray and
+        the wall's normal [rad].
     """
 
     plane_id: str
@@ -167,6 +199,11 @@ class Candidate:
     cov_observed: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)), repr=False)
     contrast: float = np.inf
     sigma_b_measured: float = np.nan
+    wall_offset: float = 0.0
+    sigma_wall_offset: float = np.inf
+    height_margin: float = np.inf
+    range: float = 0.0
+    incidence: float = 0.0
 
     @property
     def sigma_s(self) -> float:
@@ -301,13 +338,20 @@ def search_boundary(
     config: LandmarkConfig = LandmarkConfig(),
     plane_config: PlaneConfig = PlaneConfig(),
     window_px: float = 15.0,
+    border_sigma_px: float | None = None,
+    bridge_px: int | None = None,
 ) -> Boundary | None:
     """Find a free edge of a fitted plane in both images (Sec 3.2) → ``P_b, Σ_Pb`` on the plane.
 
     ``members_u`` (k, 2): left and right columns of the plane's member segment pairs, for the rule that
     a boundary found inside the outermost segment is moved to it. Returns None when the region does not
     reach the search window in the left image. ``window_px``: the SAD window width used when
-    ``config.boundary_window_px`` is None.
+    ``config.boundary_window_px`` is None. ``border_sigma_px``: σ [px] of the planar region's border in the
+    disparity images (``noise.boundary_px``), shared by both images; None: a uniform allowance over the
+    window, ``w / sqrt(12)``. ``bridge_px``: the widest hole in the region a row's run is followed across
+    (default ``w // 2``, pixels the disparity checks left out; :func:`landmarks_on_plane` allows the whole
+    window where the map has no other wall beyond the edge, so that a textureless strip just inside the edge,
+    a joint or a door frame, does not end the region early).
     """
     w = config.boundary_window_px if config.boundary_window_px is not None else window_px
     pred = fit.prediction
@@ -333,7 +377,8 @@ def search_boundary(
         if regions[img] is None:
             rows, cols = np.zeros(0, int), np.zeros(0)
         else:
-            rows, cols = _boundary_columns(regions[img], lo, hi, outward, int(w // 2))
+            rows, cols = _boundary_columns(regions[img], lo, hi, outward, int(w // 2) if bridge_px is None
+                                           else int(bridge_px))
             keep = robust_rows(cols, config.row_outlier_mad)
             rows, cols = rows[keep], cols[keep]
         if len(rows) < config.min_boundary_rows:
@@ -359,7 +404,7 @@ def search_boundary(
         var_b[img] = var + camera.sigma_img**2
     # The window term is one physical effect seen by both disparity images (the window straddling the
     # depth edge shifts the region's border the same way in 3D): it is shared, fully correlated.
-    var_w = w**2 / 12.0
+    var_w = w**2 / 12.0 if border_sigma_px is None else float(border_sigma_px) ** 2
     cov_uv = np.diag(var_b) + var_w
     sigma_u = np.sqrt(np.diag(cov_uv))
     P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
@@ -387,9 +432,15 @@ def model_features(
     pairs,
     member_idx: np.ndarray,
     contrast: np.ndarray | None = None,
+    config: LandmarkConfig = LandmarkConfig(),
 ) -> list[Candidate]:
     """Relative model of the plane's member pairs w.r.t. the boundary (Eqs 12–17), ranked from the edge.
-    ``contrast`` (M,): each pair's brightness step [gray levels] (Candidate.contrast; unknown: inf)."""
+    ``contrast`` (M,): each pair's brightness step [gray levels] (Candidate.contrast; unknown: inf).
+
+    Each candidate also carries what the selection needs to tell a line on the wall from one in front of it:
+    the innovation of its point-on-plane update (``wall_offset`` and its σ: the triangulated point against
+    the fitted line, Eq 12) and the margin of its heights (``config.row_sigma_px`` rows and the depth's σ).
+    """
     plane = fit.plane
     X = fit.X
     edge = boundary.edge
@@ -401,14 +452,28 @@ def model_features(
     if not ok.any():
         return []
     k, P_f, cov_f = k[ok], P_f[ok], cov_f[ok]
+    # Eq 12's innovation before the fusion: is the line on the fitted wall at all?
+    G, J_G_P, J_G_R = fit.constraint(P_f)
+    var_G = np.einsum("i,kij,j->k", J_G_P, cov_f, J_G_P) + np.einsum("ki,ij,kj->k", J_G_R, fit.cov_R, J_G_R)
     P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
     d_p = (P_hat - boundary.P) @ t
     sigma_f = np.sqrt(np.einsum("i,kij,j->k", t, cov_hat, t))
     var_s = boundary.sigma_along**2 + sigma_f**2
     tt = np.outer(t, t)
-    Zc = camera.to_camera(X, P_hat)[1]
+    Xc, Zc = camera.to_camera(X, P_hat)
     z_high = camera.heights(pairs.v_top[k], Zc)
     z_low = camera.heights(pairs.v_bottom[k], Zc)
+    # heights: z = h − (v − c_v) Z / f; σ_z² = (Z σ_v / f)² + ((h − z) σ_Z / Z)²
+    centre = camera.optical_centres(X)[0]
+    ray = P_hat - centre
+    dist = np.hypot(ray[:, 0], ray[:, 1])
+    view = ray / dist[:, None]
+    var_Z = np.einsum("ki,kij,kj->k", view, cov_hat, view)
+    sigma_row_z = Zc * config.row_sigma_px / camera.f
+    h = camera.mount_height
+    span = np.maximum(np.abs(h - z_low), np.abs(h - z_high))
+    margin = config.off_wall_sigma * np.sqrt(sigma_row_z**2 + (span / Zc) ** 2 * var_Z)
+    incidence = np.arccos(np.clip(np.abs(view @ plane.normal), 0.0, 1.0))
     out = []
     for rank, j in enumerate(np.argsort(d_p, kind="stable")):
         i = int(k[j])
@@ -419,17 +484,24 @@ def model_features(
                       float(z_low[j]), float(z_high[j]), float(pairs.length_similarity[i]), float(pairs.u_left[i]),
                       float(pairs.u_right[i]), float(pairs.v_top[i]), float(pairs.v_bottom[i]),
                       P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured,
-                      contrast=np.inf if contrast is None else float(contrast[i]))
+                      contrast=np.inf if contrast is None else float(contrast[i]),
+                      wall_offset=float(G[j]), sigma_wall_offset=float(np.sqrt(var_G[j])),
+                      height_margin=float(margin[j]), range=float(dist[j]), incidence=float(incidence[j]))
         )
     return out
 
 
-def select(candidates: list[Candidate], boundaries: list[Boundary], config: LandmarkConfig = LandmarkConfig()):
-    """Sec 4: the near-boundary 3σ rule against every visible free edge, then length similarity (Eq 18)."""
+def select(candidates: list[Candidate], boundaries: list[Boundary], config: LandmarkConfig = LandmarkConfig(),
+           z_range: tuple[float, float] | None = None):
+    """Sec 4 and beyond: a line must be on its wall (:func:`on_wall_reason`), then the near-boundary 3σ rule
+    against every visible free edge, length similarity (Eq 18), contrast, range and incidence. ``z_range``:
+    the wall's mapped bottom and top [m] (default: the candidates' plane's is not checked)."""
     out = []
     for c in candidates:
-        reason = ""
+        reason = on_wall_reason(c, config, z_range)
         for b in boundaries:
+            if reason:
+                break
             if b.plane_id != c.plane_id:
                 continue
             if b.edge == c.edge:
@@ -451,8 +523,23 @@ def select(candidates: list[Candidate], boundaries: list[Boundary], config: Land
             reason = REASON_LENGTH
         if not reason and c.contrast < config.min_contrast:
             reason = REASON_CONTRAST
+        if not reason and c.range > config.max_range:
+            reason = REASON_FAR
+        if not reason and c.incidence > math.radians(config.max_incidence_deg):
+            reason = REASON_OBLIQUE
         out.append(_replace(c, selected=not reason, reason=reason))
     return out
+
+
+def on_wall_reason(c: Candidate, config: LandmarkConfig, z_range: tuple[float, float] | None = None) -> str:
+    """Why candidate ``c`` is not a line on its wall, or "": its triangulated position is off the fitted plane
+    by more than ``off_wall_sigma`` σ (:attr:`LandmarkConfig.off_wall_sigma` states the smallest offset
+    resolved), or its ends reach beyond the wall's mapped heights ``z_range`` by more than their margin."""
+    if abs(c.wall_offset) > config.off_wall_sigma * c.sigma_wall_offset:
+        return REASON_OFF_WALL
+    if z_range is not None and (c.z_low < z_range[0] - c.height_margin or c.z_high > z_range[1] + c.height_margin):
+        return REASON_HEIGHT
+    return ""
 
 
 def _replace(c: Candidate, **kw) -> Candidate:
@@ -466,12 +553,14 @@ def _inward(plane, edge: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PlaneLandmarks:
-    """Everything modelled on one plane in one frame."""
+    """Everything modelled on one plane in one frame; ``rejected_boundaries`` are boundaries found but not
+    used, each with the reason (a sentence for the log)."""
 
     fit: PlaneFit
     boundaries: list[Boundary]
     members: np.ndarray
     candidates: list[Candidate]
+    rejected_boundaries: list[tuple[Boundary, str]] = field(default_factory=list)
 
 
 def landmarks_on_plane(
@@ -485,6 +574,9 @@ def landmarks_on_plane(
     window_px: float = 15.0,
     valid_columns: tuple[tuple[float, float], tuple[float, float]] | None = None,
     world_map: Map | None = None,
+    *,
+    cov_X=None,
+    border_sigma_px: float | None = None,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection.
 
@@ -494,6 +586,9 @@ def landmarks_on_plane(
     ``world_map``: when given, an edge with no depth step behind it (:func:`edge_depth_step`, below
     ``min_edge_step_sigma``) is not searched either. Ends not searched (or not found) are placed from the
     edge that was found with the map's length, and features near them are rejected like near a found one.
+    ``cov_X`` (3, 3): the pose covariance; with it a found boundary is checked against the map's free edge
+    (:func:`boundary_disagreement`) and not used when it is farther than ``boundary_gate_sigma`` σ.
+    ``border_sigma_px``: see :func:`search_boundary`.
     """
     members = plane_members(fit, pairs, left_segments, plane_config)
     # A wall in line with another (two partitions in a row) shares its plane: segments beyond the wall's ends
@@ -502,7 +597,7 @@ def landmarks_on_plane(
     members = members & (pairs.u_left >= lo) & (pairs.u_left <= hi)
     idx = np.flatnonzero(members)
     members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
-    boundaries = []
+    boundaries, rejected = [], []
     for edge in fit.plane.free_edges:
         e = fit.prediction.edges[edge]
         if not np.all(np.isfinite(e.u)):  # the edge is behind the camera
@@ -521,19 +616,44 @@ def landmarks_on_plane(
             step = edge_depth_step(camera, fit.X, world_map, fit.plane, edge, window_px / 2 + 1)
             if abs(step) < config.min_edge_step_sigma * plane_config.sigma_nu(camera):
                 continue
-        b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px)
-        if b is not None:
-            boundaries.append(b)
+        bridge = None
+        if world_map is not None and not other_wall_beyond(camera, fit, world_map, edge, config.search_sigma):
+            bridge = int(np.ceil(max(e.window(img, config.search_sigma)[1] - e.window(img, config.search_sigma)[0]
+                                     for img in (0, 1))))
+        b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px,
+                            border_sigma_px, bridge)
+        if b is None:
+            continue
+        if cov_X is not None:
+            off, sigma = boundary_disagreement(b, fit.plane, fit.X, cov_X)
+            if abs(off) > config.boundary_gate_sigma * sigma:
+                rejected.append((b, f"plane {fit.plane.label!r}: the boundary found at {edge} is {100 * off:+.1f} cm "
+                                    f"along the wall from the map's free edge (σ {100 * sigma:.1f} cm): not used"))
+                continue
+        boundaries.append(b)
     if not boundaries:
-        return PlaneLandmarks(fit, [], members, [])
+        return PlaneLandmarks(fit, [], members, [], rejected)
     ref = min(boundaries, key=lambda b: b.sigma_along)
     step = left_segments.contrast[pairs.left_index] / 4.0  # a Sobel_x response is 4× the step across an edge
-    cands = model_features(camera, fit, ref, pairs, idx, step)
+    cands = model_features(camera, fit, ref, pairs, idx, step, config)
     # An end of the wall not found in this frame (not free, out of the searchable part of the image, or
     # without a depth step) is still where the map puts it: the wall's length from the edge that was found.
     # Features near it are near a boundary too.
     mapped = mapped_boundaries(fit.plane, boundaries, ref)
-    return PlaneLandmarks(fit, boundaries, members, select(cands, boundaries + mapped, config))
+    return PlaneLandmarks(fit, boundaries, members, select(cands, boundaries + mapped, config, fit.plane.z),
+                          rejected)
+
+
+def boundary_disagreement(b: Boundary, plane, X, cov_X) -> tuple[float, float]:
+    """How far [m] boundary ``b`` (found from the mean pose ``X``) lies along the wall from the map's free edge,
+    inward positive, and the σ of that difference [m]: the boundary's own ``σ_along`` and the pose covariance
+    ``cov_X`` (3, 3) carried through the rigid placement ``P = R(θ) p + (x, y)``, projected on the wall."""
+    t = b.inward
+    off = float((b.P - plane.edge(b.edge)) @ t)
+    X = np.asarray(X, dtype=float)
+    J = np.array([[1.0, 0.0, -(b.P[1] - X[1])], [0.0, 1.0, b.P[0] - X[0]]])  # ∂P/∂(x, y, θ)
+    Jt = t @ J
+    return off, float(np.sqrt(b.sigma_along**2 + Jt @ np.asarray(cov_X, dtype=float) @ Jt))
 
 
 def mapped_boundaries(plane, boundaries: list[Boundary], ref: Boundary) -> list[Boundary]:
@@ -571,6 +691,31 @@ def _other_walls(world_map: Map, plane) -> tuple[np.ndarray, list[int]]:
     """The map's walls (K, 2, 2) and the index of ``plane`` among them to leave out (none if not in the map)."""
     ids = [w.id for w in world_map]
     return world_map.segments(), ([ids.index(plane.id)] if plane.id in ids else [])
+
+
+def other_wall_beyond(camera: StereoCamera, fit: PlaneFit, world_map: Map, edge: str, search_sigma: float) -> bool:
+    """Whether another wall of the map shows beyond the wall's end ``edge`` inside its search window, at a
+    disparity inside the plane's band: the planar region could run on over it (two partitions in a row), so a
+    hole in the region may be the gap between them and must not be bridged."""
+    e = fit.prediction.edges[edge]
+    u_e = float(e.u[0])
+    u_i = float(_inner_columns(camera, fit.X, fit.plane, edge)[0])
+    if not np.isfinite(u_e + u_i):
+        return True
+    lo, hi = e.window(0, search_sigma)
+    outer = lo if u_e < u_i else hi
+    cols = np.linspace(u_e, outer, max(2, int(abs(outer - u_e)) + 1))
+    walls, exclude = _other_walls(world_map, fit.plane)
+    if len(walls) == len(exclude):
+        return False
+    X = fit.X
+    rays = camera.column_ray(X, cols)
+    dist = ray_distances(camera.optical_centres(X)[0], rays, walls, exclude=exclude)
+    cam = camera.camera_pose(X)
+    Z = dist * (rays @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
+    d = np.where(np.isfinite(Z) & (Z > 0), camera.f * camera.baseline / np.where(Z > 0, Z, 1.0), 0.0)
+    d_edge, sigma = fit.prediction.disparity_at(u_e)
+    return bool(np.any(np.abs(d - d_edge) <= fit.prediction.gate * sigma + 1.0))
 
 
 def edge_occluded(camera: StereoCamera, X, world_map: Map, plane, edge: str) -> bool:

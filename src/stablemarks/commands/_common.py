@@ -96,13 +96,19 @@ def parse_overrides(items: list[str]) -> dict:
     return out
 
 
-def load_run_config(args, source=None):
-    """The resolved configuration: ``--config FILE``, then every ``--set SECTION.KEY=VALUE``, then the
+def load_run_config(args, source=None, base=None):
+    """The resolved configuration: ``base`` (default ``--preset NAME`` or the defaults), ``--config FILE``,
+    then every ``--set SECTION.KEY=VALUE``, then the
     settings ``source`` describes (its ``config_defaults``: a simulated robot's odometry noise and pan
     policy) where the user left the default."""
-    from ..config import load_config
+    from ..config import Config, load_config, parse_config
+    from ..maps import read_yaml
 
-    config = load_config(getattr(args, "config", None))
+    preset = getattr(args, "preset", None)
+    if base is None:
+        base = Config.preset(preset) if preset else Config()
+    config = base if getattr(args, "config", None) is None else parse_config(
+        read_yaml(args.config, "configuration file"), str(args.config), base=base)
     if getattr(args, "set", None):
         config = config.with_overrides(parse_overrides(args.set), "--set")
     if source is not None:

@@ -138,6 +138,8 @@ def test_records_replay_the_filter(lab_short, lab_scenario):
     for rec in result.records:
         if rec.odometry is not None:
             ekf.predict(rec.odometry, rec.cov_odometry)
+        for i in rec.dropped:
+            ekf.remove_landmark(i)
         if rec.measurements:
             ekf.update([(i, (ul, ur)) for i, ul, ur in rec.measurements], rec.pan, frame=rec.index)
         for ids, values, cov in rec.landmark_priors:

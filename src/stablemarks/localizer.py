@@ -71,6 +71,9 @@ class FrameRecord:
     """Landmarks associated with a segment pair (a superset of ``observed``)."""
     new: list[int] = field(default_factory=list)
     """Landmarks entered in this frame."""
+    dropped: list[int] = field(default_factory=list)
+    """Landmarks dropped from the filter in this frame (re-check failed, or missed too often), before the
+    update: they are marginalised out."""
     n_landmarks: int = 0
     n_pairs: int = 0
     """Segment pairs kept by the disparity filter."""
@@ -101,7 +104,7 @@ class FrameRecord:
             "index": self.index, "stamp": self.stamp, "pan": self.pan, "pan_command": self.pan_command,
             "pose": plain(self.pose), "cov_pose": plain(self.cov_pose), "dead_reckoning": plain(self.dead_reckoning),
             "true_pose": plain(self.true_pose), "observed": self.observed, "nis": self.nis,
-            "associated": self.associated, "new": self.new, "n_landmarks": self.n_landmarks,
+            "associated": self.associated, "new": self.new, "dropped": self.dropped, "n_landmarks": self.n_landmarks,
             "n_pairs": self.n_pairs, "n_candidates": self.n_candidates, "n_selected": self.n_selected,
             "warnings": self.warnings, "health": self.health, "timings": self.timings,
             "odometry": plain(self.odometry), "cov_odometry": plain(self.cov_odometry),
@@ -182,6 +185,9 @@ class Localizer:
         if prior_landmarks is not None:
             self.ekf.load_prior_landmarks(prior_landmarks, world_map)
         self._dead_reckoning = SE2.from_array(start)
+        self._missed: dict[int, int] = {}
+        self.retired: dict[int, LandmarkEstimate] = {}
+        """Landmarks dropped from the filter, as they were when dropped (id → estimate)."""
         self._odometry: SE2 | None = None
         self._pan: float | None = None
         self._index = 0
@@ -223,6 +229,28 @@ class Localizer:
         return path
 
     # ----------------------------------------------------------------- steps
+    def _missed_landmarks(self, model: FrameLandmarks | None, assoc, pan: float, dropped: list[int]) -> list[int]:
+        """Wall landmarks predicted in view on a wall modelled in this frame (a boundary found) but not
+        associated: counted frame by frame; those missed ``ekf.max_missed`` times in a row are returned."""
+        if model is None or not self.ekf.n_landmarks:
+            return []
+        modelled = {m.fit.plane.id for m in model.planes if m.boundaries}
+        seen = {i for i, _ in assoc}
+        out = []
+        for i in self.ekf.visible(pan):
+            if i in dropped:
+                continue
+            if i in seen:
+                self._missed.pop(i, None)
+                continue
+            plane = self.ekf.landmark_plane(i)
+            if plane is None or plane.id not in modelled:
+                continue
+            self._missed[i] = self._missed.get(i, 0) + 1
+            if self._missed[i] >= self.config.ekf.max_missed:
+                out.append(i)
+        return out
+
     def _increment(self, odometry) -> tuple[SE2 | None, np.ndarray | None]:
         if odometry is None:
             return None, None
@@ -287,6 +315,13 @@ class Localizer:
                 record.n_selected = len(model.selected)
             record.n_pairs = len(front.kept_pairs)
             assoc = method.associate(self.ekf, front, model, pan, cam_k)
+            assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma)
+            dropped += self._missed_landmarks(model, assoc, pan, dropped)
+            for i in dropped:
+                self.retired[i] = self.ekf.landmark(i)
+                self.ekf.remove_landmark(i)
+                self._missed.pop(i, None)
+            record.dropped = dropped
             record.associated = [int(i) for i, _ in assoc]
             chosen = self.ekf.select_for_update(assoc, pan)
             if chosen:

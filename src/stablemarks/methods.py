@@ -69,6 +69,34 @@ class Method:
         """The candidates this method enters as landmarks."""
         return model.selected
 
+    def recheck(self, ekf: JointEKF, model: FrameLandmarks | None, assoc: list[tuple[int, int]],
+                sigma: float) -> tuple[list[tuple[int, int]], list[int]]:
+        """Re-check each associated wall landmark against the frame's own model of the same line: positions
+        along the wall (both pose-independent) must agree within ``sigma`` σ of their two variances. A landmark
+        that does not is dropped from the filter (and the pair enters again as a new landmark from this frame's
+        model): an error made from far away or at a slant is corrected when the line is seen better. Returns
+        the associations kept and the ids dropped."""
+        if model is None:
+            return assoc, []
+        by_pair = {c.pair: c for c in model.candidates}
+        keep, dropped = [], []
+        for i, j in assoc:
+            c = by_pair.get(j)
+            if c is None or i in dropped:
+                keep.append((i, j))
+                continue
+            lm = ekf.landmark(i)
+            if lm.kind != "wall" or lm.plane_id != c.plane_id:
+                keep.append((i, j))
+                continue
+            plane = ekf.landmark_plane(i)
+            gap = float(plane.along(c.P) - plane.along(lm.position))
+            if abs(gap) > sigma * np.sqrt(float(lm.cov[0, 0]) + c.sigma_s**2):
+                dropped.append(i)
+            else:
+                keep.append((i, j))
+        return keep, dropped
+
     def enter(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, used_pairs: set[int],
               camera: StereoCamera, world_map: Map, frame: int, config: Config) -> Entered:
         """Enter the frame's new wall landmarks, jointly per boundary (:func:`enter_wall_landmarks`)."""

@@ -48,6 +48,14 @@ class OnlineResult:
     rejected_truth: dict[str, str] = field(default_factory=dict)
     cov0: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
     visible_truth: list[list[str]] = field(default_factory=list)
+    retired: dict = field(default_factory=dict)
+    """Landmarks dropped from the filter during the run, as they were when dropped (id → estimate)."""
+
+    def landmark(self, landmark_id: int):
+        """A landmark of the run: in the final filter, or as it was when dropped."""
+        if landmark_id in self.retired and landmark_id not in self.ekf.landmark_ids:
+            return self.retired[landmark_id]
+        return self.ekf.landmark(landmark_id)
 
     @property
     def stamps(self) -> np.ndarray:
@@ -120,4 +128,4 @@ def run_online(
         if progress is not None:
             progress(len(records), n)
     return OnlineResult(source.name, localizer.method.name, records, localizer.ekf, localizer.world_map, first_view,
-                        cov0=localizer.start_cov)
+                        cov0=localizer.start_cov, retired=dict(localizer.retired))

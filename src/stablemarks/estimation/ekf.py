@@ -103,11 +103,18 @@ class EKFConfig:
         "several, less uncertain landmarks", Sec 5), chosen by :meth:`JointEKF.select_for_update`.
     margin_px : a landmark is a candidate for association only if both its predicted columns lie this
         far inside the image [px].
+    max_missed : a wall landmark predicted in view on a wall modelled in the frame but not associated for this
+        many frames in a row is dropped from the filter (marginalised out): it was wrong or is not stable.
+    recheck_sigma : an associated wall landmark whose along-wall position disagrees with the frame's own model
+        of the same line by more than this many σ (both variances) is dropped and entered again from the
+        frame's model: an error made from afar is corrected, not locked in.
     """
 
     gate_probability: float = 0.99
     max_updates_per_frame: int = 6
     margin_px: float = 0.0
+    max_missed: int = 5
+    recheck_sigma: float = 3.0
 
     def __post_init__(self) -> None:
         if not 0.0 < self.gate_probability < 1.0:
@@ -116,6 +123,11 @@ class EKFConfig:
         k = self.max_updates_per_frame
         if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
             raise ConfigError(expected("a positive integer", k, where="ekf.max_updates_per_frame"))
+        m = self.max_missed
+        if isinstance(m, bool) or not isinstance(m, int | np.integer) or m < 1:
+            raise ConfigError(expected("a positive integer", m, where="ekf.max_missed"))
+        if not (np.isfinite(self.recheck_sigma) and self.recheck_sigma > 0):
+            raise ConfigError(expected("a positive number", self.recheck_sigma, where="ekf.recheck_sigma"))
         if not (np.isfinite(self.margin_px) and self.margin_px >= 0):
             raise ConfigError(expected("a non-negative number of pixels", self.margin_px, where="ekf.margin_px"))
 

@@ -65,18 +65,21 @@ def main() -> None:
     rng, inc, err, sig = a.T
     z = err / sig
     print(f"all: n={len(a)}  RMS z={np.sqrt(np.mean(z**2)):.2f}  RMS err={1000 * np.sqrt(np.mean(err**2)):.1f} mm")
-    print("range [m]     n   RMS z   RMS err [mm]   max |err| [mm]")
+    def line(label, m):
+        if m.any():
+            rms_z, rms = np.sqrt(np.mean(z[m] ** 2)), 1000 * np.sqrt(np.mean(err[m] ** 2))
+            print(f"{label:<16} {m.sum():>6} {rms_z:>7.2f} {rms:>12.1f} {1000 * np.abs(err[m]).max():>14.1f}")
+
+    print("range [m]            n   RMS z   RMS err [mm]   max |err| [mm]")
     for lo, hi in [(0, 3), (3, 5), (5, 7), (7, 9), (9, 11), (11, 15)]:
-        m = (rng >= lo) & (rng < hi)
-        if m.any():
-            print(f"{lo:>4}-{hi:<4} {m.sum():>6} {np.sqrt(np.mean(z[m] ** 2)):>7.2f} {1000 * np.sqrt(np.mean(err[m] ** 2)):>12.1f}"
-                  f" {1000 * np.abs(err[m]).max():>14.1f}")
-    print("incidence [deg]  n   RMS z   RMS err [mm]   max |err| [mm]")
+        line(f"{lo}-{hi}", (rng >= lo) & (rng < hi))
+    print("incidence [deg]      n   RMS z   RMS err [mm]   max |err| [mm]")
     for lo, hi in [(0, 30), (30, 45), (45, 60), (60, 70), (70, 80), (80, 90)]:
-        m = (inc >= lo) & (inc < hi)
-        if m.any():
-            print(f"{lo:>4}-{hi:<4} {m.sum():>6} {np.sqrt(np.mean(z[m] ** 2)):>7.2f} {1000 * np.sqrt(np.mean(err[m] ** 2)):>12.1f}"
-                  f" {1000 * np.abs(err[m]).max():>14.1f}")
+        line(f"{lo}-{hi}", (inc >= lo) & (inc < hi))
+    print("range, incidence     n   RMS z   RMS err [mm]   max |err| [mm]")
+    for lo, hi in [(0, 5), (5, 7), (7, 9), (9, 15)]:
+        for a, b in [(0, 60), (60, 90)]:
+            line(f"{lo}-{hi} m, {a}-{b}°", (rng >= lo) & (rng < hi) & (inc >= a) & (inc < b))
 
 
 if __name__ == "__main__":

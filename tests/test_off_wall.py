@@ -56,10 +56,10 @@ def test_a_line_beyond_the_walls_height_is_not_the_walls():
 
 
 def test_entry_limits_by_range_and_incidence():
-    out = select([_cand(rng=9.0), _cand(rng=11.0), _cand(incidence=np.radians(69)), _cand(incidence=np.radians(71))],
+    out = select([_cand(rng=11.0), _cand(rng=13.0), _cand(incidence=np.radians(59)), _cand(incidence=np.radians(61))],
                  [BOUNDARY])
     assert [c.reason for c in out] == ["", REASON_FAR, "", REASON_OBLIQUE]
-    out = select([_cand(rng=11.0)], [BOUNDARY], LandmarkConfig(max_range=12.0))
+    out = select([_cand(rng=13.0)], [BOUNDARY], LandmarkConfig(max_range=14.0))
     assert out[0].selected
 
 

@@ -32,6 +32,7 @@ from pathlib import Path
 from .errors import ConfigError, InputError, expected
 from .estimation import EKFConfig
 from .geometry import StereoCamera
+from .health import HealthConfig
 from .landmarks import LandmarkConfig
 from .maps import read_yaml
 from .motion import OdometryNoise, PanConfig
@@ -106,6 +107,7 @@ class Config:
     planes: PlaneConfig = field(default_factory=PlaneConfig)
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
     ekf: EKFConfig = field(default_factory=EKFConfig)
+    health: HealthConfig = field(default_factory=HealthConfig)
 
     def __post_init__(self) -> None:
         sad = self.sad

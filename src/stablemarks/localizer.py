@@ -26,11 +26,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.special import chdtri
 
 from .config import Config
 from .errors import InputError, expected
 from .estimation import JointEKF, LandmarkEstimate
 from .geometry import SE2, StereoCamera
+from .health import HealthMonitor
 from .maps import Map
 from .methods import Entered, Method, method_named
 from .motion import choose_pan
@@ -71,6 +73,9 @@ class FrameRecord:
     """Landmarks associated with a segment pair (a superset of ``observed``)."""
     new: list[int] = field(default_factory=list)
     """Landmarks entered in this frame."""
+    inflation: float = 1.0
+    """Factor the pose covariance was widened by before the update (1: not widened; see
+    :mod:`stablemarks.health`, ``odometry_disagrees``)."""
     dropped: list[int] = field(default_factory=list)
     """Landmarks dropped from the filter in this frame (re-check failed, or missed too often), before the
     update: they are marginalised out."""
@@ -104,7 +109,8 @@ class FrameRecord:
             "index": self.index, "stamp": self.stamp, "pan": self.pan, "pan_command": self.pan_command,
             "pose": plain(self.pose), "cov_pose": plain(self.cov_pose), "dead_reckoning": plain(self.dead_reckoning),
             "true_pose": plain(self.true_pose), "observed": self.observed, "nis": self.nis,
-            "associated": self.associated, "new": self.new, "dropped": self.dropped, "n_landmarks": self.n_landmarks,
+            "associated": self.associated, "new": self.new, "dropped": self.dropped, "inflation": self.inflation,
+            "n_landmarks": self.n_landmarks,
             "n_pairs": self.n_pairs, "n_candidates": self.n_candidates, "n_selected": self.n_selected,
             "warnings": self.warnings, "health": self.health, "timings": self.timings,
             "odometry": plain(self.odometry), "cov_odometry": plain(self.cov_odometry),
@@ -140,6 +146,16 @@ class Estimate:
     front: FrontEnd | None = None
     model: FrameLandmarks | None = None
     entered: Entered = field(default_factory=Entered)
+
+
+def _edges_missing(model: FrameLandmarks | None, width: int) -> bool:
+    """Whether free edges of the map were predicted inside the image (``width`` px) but no boundary was found
+    on any plane."""
+    if model is None:
+        return False
+    predicted = any(np.all(np.isfinite(e.u)) and 0 <= e.u[0] < width
+                    for pred in model.predictions for e in pred.edges.values() if e.free)
+    return predicted and not any(m.boundaries for m in model.planes)
 
 
 def landmark_map_document(ekf: JointEKF, method: str = "stablemarks") -> dict:
@@ -186,6 +202,7 @@ class Localizer:
             self.ekf.load_prior_landmarks(prior_landmarks, world_map)
         self._dead_reckoning = SE2.from_array(start)
         self._missed: dict[int, int] = {}
+        self.health = HealthMonitor(self.config.health)
         self.retired: dict[int, LandmarkEstimate] = {}
         """Landmarks dropped from the filter, as they were when dropped (id → estimate)."""
         self._odometry: SE2 | None = None
@@ -229,6 +246,19 @@ class Localizer:
         return path
 
     # ----------------------------------------------------------------- steps
+    def _widen_to_fit(self, pattern: list[tuple[int, int]], front: FrontEnd, pan: float) -> float:
+        """Widen the pose covariance by factors of 4 until ``pattern`` (landmark id, pair index) is jointly
+        compatible, up to ``health.max_inflation``; returns the factor used."""
+        pairs = front.kept_pairs
+        measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+        factor = 1.0
+        while factor * 4.0 <= self.config.health.max_inflation:
+            self.ekf.inflate_pose(4.0)
+            factor *= 4.0
+            if self.ekf.joint_compatible(pattern, measured, pan):
+                break
+        return factor
+
     def _missed_landmarks(self, model: FrameLandmarks | None, assoc, pan: float, dropped: list[int]) -> list[int]:
         """Wall landmarks predicted in view on a wall modelled in this frame (a boundary found) but not
         associated: counted frame by frame; those missed ``ekf.max_missed`` times in a row are returned."""
@@ -303,6 +333,7 @@ class Localizer:
         front = model = None
         entered = Entered()
         method = self.method
+        nis_high = disagree = edges_missing = False
         if method.uses_vision:
             check_pair(np.asarray(left), np.asarray(right))
             front = run_front_end(left, right, self.config)
@@ -314,7 +345,13 @@ class Localizer:
                 record.warnings, record.n_candidates = list(model.warnings), len(model.candidates)
                 record.n_selected = len(model.selected)
             record.n_pairs = len(front.kept_pairs)
-            assoc = method.associate(self.ekf, front, model, pan, cam_k)
+            report: dict = {}
+            assoc = method.associate(self.ekf, front, model, pan, cam_k, report)
+            disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
+                max(len(m) for m in report["incompatible"]) >= 2
+            if disagree and self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
+                record.inflation = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
+                assoc = method.associate(self.ekf, front, model, pan, cam_k)
             assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma)
             dropped += self._missed_landmarks(model, assoc, pan, dropped)
             for i in dropped:
@@ -331,10 +368,13 @@ class Localizer:
                 record.measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen]
                 record.observed = [int(i) for i in res.ids]
                 record.nis = [float(v) for v in res.nis]
+                nis_high = res.nis_total > float(chdtri(res.dof, 0.01))
             t3 = time.perf_counter()
             timings["associate_update"] = t3 - t2
-            entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
-                                   self.config)
+            edges_missing = _edges_missing(model, self.camera.width)
+            if not (edges_missing and self.health.runs["edges_not_found"] + 1 >= self.config.health.edges_frames):
+                entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
+                                       self.config)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
             timings["select"] = time.perf_counter() - t3
         self._pan = pan
@@ -342,6 +382,9 @@ class Localizer:
         record.pose, record.cov_pose = self.ekf.pose, self.ekf.cov_pose
         record.n_landmarks = self.ekf.n_landmarks
         record.pan_command = self.command_pan()
+        record.health = self.health.update(edges_missing=edges_missing, nis_high=nis_high, disagree=disagree,
+                                           observed=bool(record.observed), has_landmarks=self.ekf.n_landmarks > 0,
+                                           inflation=record.inflation)
         timings["total"] = time.perf_counter() - t0
         record.timings = timings
         return Estimate(record.stamp, record.pose, record.cov_pose, record.pan_command, list(record.health), record,

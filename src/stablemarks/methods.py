@@ -55,15 +55,16 @@ class Method:
         return select_landmarks(front, camera, world_map, X, cov_X, config)
 
     def associate(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, pan: float,
-                  camera: StereoCamera) -> list[tuple[int, int]]:
-        """``(landmark id, kept-pair index)`` of this frame (:func:`~stablemarks.estimation.associate_frame`)."""
+                  camera: StereoCamera, report: dict | None = None) -> list[tuple[int, int]]:
+        """``(landmark id, kept-pair index)`` of this frame (:func:`~stablemarks.estimation.associate_frame`,
+        which fills ``report``)."""
         pairs = front.kept_pairs
         if not ekf.n_landmarks or not len(pairs):
             return []
         measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
         polarity = front.left_segments.polarity[pairs.left_index]
         centre = camera.optical_centres(ekf.pose)[0]
-        return associate_frame(ekf, pairs, measured, pan, model, polarity, centre)
+        return associate_frame(ekf, pairs, measured, pan, model, polarity, centre, report)
 
     def take(self, model: FrameLandmarks) -> list[Candidate]:
         """The candidates this method enters as landmarks."""

@@ -26,7 +26,8 @@ __all__ = ["associate_frame", "height_cost", "is_duplicate", "match_along_wall",
 
 
 def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, model=None,
-                    polarity: np.ndarray | None = None, centre=None) -> list[tuple[int, int]]:
+                    polarity: np.ndarray | None = None, centre=None, report: dict | None = None
+                    ) -> list[tuple[int, int]]:
     """Pairs (landmark id, segment-pair index) for this frame's update.
 
     Wall landmarks are found by the *pattern* of this frame's candidates along each wall (their positions
@@ -37,6 +38,10 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     jointly compatible. ``polarity`` (M,): the sign of each pair's brightness step in the left image, seen from
     the camera centre ``centre`` (2,); a wall landmark never matches an edge whose step along its wall is the
     opposite (a bar's two edges, equally long and a bar's width apart, differ only in it).
+
+    ``report`` (a dict, filled when given): ``"compatible"`` the wall patterns kept, ``"incompatible"`` those
+    matched along their wall but jointly incompatible with the predicted pose (evidence that the odometry and
+    the images disagree).
     """
     if polarity is None or centre is None:
         polarity, centre = np.zeros(len(measured), dtype=int), np.zeros(2)
@@ -53,9 +58,15 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
                 walls.append(matched)
     # Wall by wall, most features first: one wall's wrong pattern must not throw out the others' right ones.
     chosen: list[tuple[int, int]] = []
+    kept, rejected = [], []
     for matched in sorted(walls, key=len, reverse=True):
         if ekf.joint_compatible(chosen + matched, measured, pan):
             chosen += matched
+            kept.append(matched)
+        else:
+            rejected.append(matched)
+    if report is not None:
+        report["compatible"], report["incompatible"] = kept, rejected
     taken_l = {i for i, _ in chosen}
     taken_p = {j for _, j in chosen}
     rest = [i for i in ekf.landmark_ids if i not in taken_l]

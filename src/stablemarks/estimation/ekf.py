@@ -501,6 +501,13 @@ class JointEKF:
             P[:3, 3:] = F @ P[:3, 3:]
             P[3:, :3] = P[:3, 3:].T
 
+    def inflate_pose(self, factor: float) -> None:
+        """Widen the pose covariance: ``P_XX ← factor · P_XX`` (``factor ≥ 1``), cross-covariances kept. The
+        change adds the PSD block ``(factor − 1) P_XX``, so ``P`` stays PSD (recovery from a slip or kidnap)."""
+        if not (np.isfinite(factor) and factor >= 1.0):
+            raise InputError(expected("a factor >= 1", factor, where="inflate_pose.factor"))
+        self._P[:3, :3] *= factor
+
     # ------------------------------------------------------------------ add
     def add_landmarks(self, new: Sequence[NewLandmark], cov_new, *, cov_pose_new=None,
                       frame: int | None = None, ids: Sequence[int] | None = None) -> list[int]:

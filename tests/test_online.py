@@ -140,8 +140,11 @@ def test_records_replay_the_filter(lab_short, lab_scenario):
             ekf.predict(rec.odometry, rec.cov_odometry)
         for i in rec.dropped:
             ekf.remove_landmark(i)
+        if rec.inflation != 1.0:
+            ekf.inflate_pose(rec.inflation)
         if rec.measurements:
-            ekf.update([(i, (ul, ur)) for i, ul, ur in rec.measurements], rec.pan, frame=rec.index)
+            ekf.update([(i, (ul, ur)) for i, ul, ur in rec.measurements], rec.pan, frame=rec.index,
+                       iterations=1 if rec.inflation == 1.0 else 5)
         for ids, values, cov in rec.landmark_priors:
             new = []
             for i, s in zip(ids, values, strict=True):

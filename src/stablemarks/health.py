@@ -5,8 +5,10 @@
 condition's name first):
 
 ``edges_not_found``
-    free edges of the map predicted in view for ``edges_frames`` frames in a row, none found: the head's pan
-    (or the pose) is probably wrong. While it holds no new landmark is entered.
+    a free edge searched in each of ``edges_frames`` frames in a row (predicted in the searchable image) was
+    not found, or found where the map does not put it: the head's pan (or the pose) is probably wrong. While it
+    holds nothing is associated, updated or entered: the walls are not where the pan says, so the pose follows
+    the odometry. It clears after ``edges_frames`` frames in a row find every searched edge where the map puts it.
 ``inconsistent``
     the joint NIS of the frame's update above its 99 % χ² bound for ``nis_frames`` frames in a row.
 ``odometry_disagrees``
@@ -31,7 +33,7 @@ CONDITIONS = ("edges_not_found", "inconsistent", "odometry_disagrees", "blind")
 class HealthConfig:
     """Thresholds of the health conditions (module docstring): frames in a row before each one holds."""
 
-    edges_frames: int = 5
+    edges_frames: int = 3
     nis_frames: int = 3
     disagree_frames: int = 1
     blind_frames: int = 10
@@ -48,7 +50,8 @@ class HealthConfig:
 
 
 MESSAGES = {
-    "edges_not_found": "edges_not_found: free edges of the map predicted in view were not found for {n} frames: "
+    "edges_not_found": "edges_not_found: free edges of the map predicted in view were not found where the map puts "
+                       "them for {n} frames: "
                        "the head's pan may be wrong (a bag's pan comes from `pan_topic`, a sequence folder's from the "
                        "pan column of frames.csv); no new landmarks are entered meanwhile",
     "inconsistent": "inconsistent: the joint NIS of the update was above its 99 % bound for {n} frames: the filter "
@@ -65,6 +68,8 @@ class HealthMonitor:
     def __init__(self, config: HealthConfig = HealthConfig()):
         self.config = config
         self.runs = dict.fromkeys(CONDITIONS, 0)
+        self.edges_latched = False
+        self._clean = 0
 
     def update(self, *, edges_missing: bool, nis_high: bool, disagree: bool, observed: bool, has_landmarks: bool,
                inflation: float = 1.0) -> list[str]:
@@ -74,9 +79,24 @@ class HealthMonitor:
                "blind": has_landmarks and not observed}
         for k, v in now.items():
             self.runs[k] = self.runs[k] + 1 if v else 0
+        # edges_not_found holds until as many frames in a row find every searched edge where the map puts it
+        self._clean = 0 if edges_missing else self._clean + 1
+        if self.runs["edges_not_found"] >= c.edges_frames:
+            self.edges_latched = True
+        elif self._clean >= c.edges_frames:
+            self.edges_latched = False
+        if self.edges_latched:
+            self.runs["edges_not_found"] = max(self.runs["edges_not_found"], c.edges_frames)
         need = {"edges_not_found": c.edges_frames, "inconsistent": c.nis_frames,
                 "odometry_disagrees": c.disagree_frames, "blind": c.blind_frames}
         return [MESSAGES[k].format(n=self.runs[k], factor=inflation) for k in CONDITIONS if self.runs[k] >= need[k]]
+
+    def suspect_edges(self, edges_missing: bool) -> bool:
+        """Whether, with this frame's ``edges_missing``, ``edges_not_found`` will hold after :meth:`update`."""
+        c = self.config.edges_frames
+        if self.edges_latched:
+            return edges_missing or self._clean + 1 < c
+        return edges_missing and self.runs["edges_not_found"] + 1 >= c
 
     def holds(self, name: str) -> bool:
         """Whether condition ``name`` held at the last update."""

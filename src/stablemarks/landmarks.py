@@ -565,6 +565,9 @@ class PlaneLandmarks:
     members: np.ndarray
     candidates: list[Candidate]
     rejected_boundaries: list[tuple[Boundary, str]] = field(default_factory=list)
+    searched: list[str] = field(default_factory=list)
+    """The free edges searched in this frame (in the searchable part of both images, not hidden, with a depth
+    step behind them)."""
 
 
 def landmarks_on_plane(
@@ -601,7 +604,7 @@ def landmarks_on_plane(
     members = members & (pairs.u_left >= lo) & (pairs.u_left <= hi)
     idx = np.flatnonzero(members)
     members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
-    boundaries, rejected = [], []
+    boundaries, rejected, searched = [], [], []
     for edge in fit.plane.free_edges:
         e = fit.prediction.edges[edge]
         if not np.all(np.isfinite(e.u)):  # the edge is behind the camera
@@ -624,6 +627,7 @@ def landmarks_on_plane(
         if world_map is not None and not other_wall_beyond(camera, fit, world_map, edge, config.search_sigma):
             bridge = int(np.ceil(max(e.window(img, config.search_sigma)[1] - e.window(img, config.search_sigma)[0]
                                      for img in (0, 1))))
+        searched.append(edge)
         b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px,
                             border_sigma_px, bridge)
         if b is None:
@@ -636,7 +640,7 @@ def landmarks_on_plane(
                 continue
         boundaries.append(b)
     if not boundaries:
-        return PlaneLandmarks(fit, [], members, [], rejected)
+        return PlaneLandmarks(fit, [], members, [], rejected, searched)
     ref = min(boundaries, key=lambda b: b.sigma_along)
     step = left_segments.contrast[pairs.left_index] / 4.0  # a Sobel_x response is 4× the step across an edge
     cands = model_features(camera, fit, ref, pairs, idx, step, config)
@@ -645,7 +649,7 @@ def landmarks_on_plane(
     # Features near it are near a boundary too.
     mapped = mapped_boundaries(fit.plane, boundaries, ref)
     return PlaneLandmarks(fit, boundaries, members, select(cands, boundaries + mapped, config, fit.plane.z),
-                          rejected)
+                          rejected, searched)
 
 
 def boundary_disagreement(b: Boundary, plane, X, cov_X) -> tuple[float, float]:

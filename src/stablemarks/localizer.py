@@ -148,14 +148,12 @@ class Estimate:
     entered: Entered = field(default_factory=Entered)
 
 
-def _edges_missing(model: FrameLandmarks | None, width: int) -> bool:
-    """Whether free edges of the map were predicted inside the image (``width`` px) but no boundary was found
-    on any plane."""
+def _edges_missing(model: FrameLandmarks | None) -> bool:
+    """Whether a free edge searched in this frame (predicted in the searchable image, see
+    :func:`~stablemarks.landmarks.landmarks_on_plane`) was not found, or found where the map does not put it."""
     if model is None:
         return False
-    predicted = any(np.all(np.isfinite(e.u)) and 0 <= e.u[0] < width
-                    for pred in model.predictions for e in pred.edges.values() if e.free)
-    return predicted and not any(m.boundaries for m in model.planes)
+    return any(len(m.boundaries) < len(m.searched) for m in model.planes)
 
 
 def landmark_map_document(ekf: JointEKF, method: str = "stablemarks") -> dict:
@@ -247,15 +245,16 @@ class Localizer:
 
     # ----------------------------------------------------------------- steps
     def _widen_to_fit(self, pattern: list[tuple[int, int]], front: FrontEnd, pan: float) -> float:
-        """Widen the pose covariance by factors of 4 until ``pattern`` (landmark id, pair index) is jointly
-        compatible, up to ``health.max_inflation``; returns the factor used."""
+        """Widen the pose covariance by factors of 4 until ``pattern`` (landmark id, pair index) fits as a typical
+        sample (its joint NIS at most its mean, ``2 · len(pattern)``; merely inside the 99 % gate would leave the
+        pose overconfident after the update), up to ``health.max_inflation``; returns the factor used."""
         pairs = front.kept_pairs
         measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
         factor = 1.0
         while factor * 4.0 <= self.config.health.max_inflation:
             self.ekf.inflate_pose(4.0)
             factor *= 4.0
-            if self.ekf.joint_compatible(pattern, measured, pan):
+            if self.ekf.joint_nis(pattern, measured, pan) <= 2 * len(pattern):
                 break
         return factor
 
@@ -345,8 +344,10 @@ class Localizer:
                 record.warnings, record.n_candidates = list(model.warnings), len(model.candidates)
                 record.n_selected = len(model.selected)
             record.n_pairs = len(front.kept_pairs)
+            edges_missing = _edges_missing(model)
+            pan_suspect = self.health.suspect_edges(edges_missing)
             report: dict = {}
-            assoc = method.associate(self.ekf, front, model, pan, cam_k, report)
+            assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report)
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
                 max(len(m) for m in report["incompatible"]) >= 2
             if disagree and self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
@@ -364,15 +365,15 @@ class Localizer:
             if chosen:
                 pairs = front.kept_pairs
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
-                res = self.ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k)
+                res = self.ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k,
+                                      iterations=1 if record.inflation == 1.0 else 5)
                 record.measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen]
                 record.observed = [int(i) for i in res.ids]
                 record.nis = [float(v) for v in res.nis]
                 nis_high = res.nis_total > float(chdtri(res.dof, 0.01))
             t3 = time.perf_counter()
             timings["associate_update"] = t3 - t2
-            edges_missing = _edges_missing(model, self.camera.width)
-            if not (edges_missing and self.health.runs["edges_not_found"] + 1 >= self.config.health.edges_frames):
+            if not pan_suspect:
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
                                        self.config)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)

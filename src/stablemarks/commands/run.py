@@ -82,7 +82,8 @@ def run(args) -> int:
     start = parse_triplet(args.pose, "x, y, theta", "--pose") if args.pose else None
     sigma = parse_triplet(args.pose_sigma, "σx, σy, σθ", "--pose-sigma")
     prior = read_yaml(args.prior_landmarks, "landmark map") if args.prior_landmarks else None
-    observers = []
+    warned = HealthWarnings()
+    observers = [warned]
     with contextlib.ExitStack() as stack:
         source = open_sequence(args.source, left_topic=args.left_topic, right_topic=args.right_topic,
                                odom_topic=args.odom_topic, pan_topic=args.pan_topic, pan_joint=args.pan_joint,
@@ -114,4 +115,38 @@ def run(args) -> int:
         paths["figure"] = figure10(out / "fig10_motion.png", result)
     print_motion_summary(console, result, config.odometry)
     console.print("wrote " + ", ".join(str(p) for p in paths.values()))
+    warned.summary()
     return 0
+
+
+class HealthWarnings:
+    """An observer printing one ``warning:`` line on stderr the first time each health condition holds (frame
+    and stamp), and at the end of the run how many frames each held."""
+
+    def __init__(self) -> None:
+        self.first: dict[str, tuple[int, float, str]] = {}
+        self.frames: dict[str, int] = {}
+
+    def __call__(self, frame, est, localizer) -> None:
+        import sys
+
+        from ..cli import FLAGS
+        from ..errors import for_cli
+
+        for message in est.health:
+            name = message.split(":", 1)[0]
+            self.frames[name] = self.frames.get(name, 0) + 1
+            if name not in self.first:
+                self.first[name] = (frame.index, frame.stamp, message)
+                print(f"warning: frame {frame.index} (stamp {frame.stamp:.3f} s): {for_cli(message, FLAGS)}",
+                      file=sys.stderr, flush=True)
+
+    def summary(self) -> None:
+        import sys
+
+        from ..cli import FLAGS
+        from ..errors import for_cli
+
+        for name, (k, _, message) in self.first.items():
+            print(f"warning: {name} held in {self.frames[name]} frame(s), first at frame {k}: "
+                  f"{for_cli(message.split(': ', 1)[1], FLAGS)}", file=sys.stderr)

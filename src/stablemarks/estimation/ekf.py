@@ -767,7 +767,7 @@ class JointEKF:
 
     # ----------------------------------------------------------------- update
     def update(self, observations: Sequence[tuple[int, Sequence[float]]], pan: float = 0.0, *,
-               frame: int | None = None) -> UpdateResult:
+               frame: int | None = None, iterations: int = 1) -> UpdateResult:
         """One stacked EKF update with the observed columns of landmarks (paper Eq 20).
 
         Parameters
@@ -775,6 +775,8 @@ class JointEKF:
         observations : ``[(landmark id, (u_l, u_r)), …]`` [px], each landmark at most once.
         pan : the frame's pan angle [rad].
         frame : frame index recorded as the landmarks' last observation.
+        iterations : Gauss–Newton iterations of the iterated EKF (1: the ordinary EKF update). The recovery from
+            a slip or kidnap uses a few: the predicted pose is then far from the one the images imply.
 
         With ``idx`` the pose's and the observed landmarks' state indices and ``H_sub`` (2m, |idx|)::
 
@@ -797,25 +799,37 @@ class JointEKF:
         if z.shape != (m, 2) or not np.all(np.isfinite(z)):
             raise InputError(expected("finite (u_l, u_r) per observation", [o[1] for o in obs],
                                       where="update.observations"))
-        uv, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
-        if not np.all(np.isfinite(uv)):
-            bad = int(self._ids[rows[~np.all(np.isfinite(uv), axis=1)][0]])
-            raise GeometryError(f"landmark {bad} is behind the camera; it cannot update the filter")
         idx = np.concatenate([np.arange(3), self._idx2[rows].ravel()])
         ar = np.arange(m)
-        H_l = np.zeros((m, 2, m, 2))
-        H_l[ar, :, ar, :] = J_I_l  # block diagonal; a wall landmark's repeated index gets a zero column
-        H = np.concatenate([J_I_X.reshape(2 * m, 3), H_l.reshape(2 * m, 2 * m)], axis=1)
-        nu = (z - uv).reshape(-1)
+        x0 = self._x.copy()
+        x_i = x0
+        for it in range(max(1, int(iterations))):
+            uv, J_I_X, J_I_l = self._project(rows, x_i, self._camera(pan))
+            if not np.all(np.isfinite(uv)):
+                bad = int(self._ids[rows[~np.all(np.isfinite(uv), axis=1)][0]])
+                raise GeometryError(f"landmark {bad} is behind the camera; it cannot update the filter")
+            H_l = np.zeros((m, 2, m, 2))
+            H_l[ar, :, ar, :] = J_I_l  # block diagonal; a wall landmark's repeated index gets a zero column
+            H = np.concatenate([J_I_X.reshape(2 * m, 3), H_l.reshape(2 * m, 2 * m)], axis=1)
+            # iterated EKF: the innovation relinearised at x_i, ν_i = z − h(x_i) − H_i (x0 − x_i)
+            dx = x0[idx] - x_i[idx]
+            dx[2] = wrap_angle(dx[2])
+            nu = (z - uv).reshape(-1) - H @ dx
+            if it == 0:
+                nu0 = nu
+            with _one_blas_thread(len(self._x)):
+                PHt = self._P[:, idx] @ H.T
+                S = H @ PHt[idx]
+                S = 0.5 * (S + S.T)
+                S[np.diag_indices(2 * m)] += self._var_img  # + R
+                sol = np.linalg.solve(S, np.column_stack([PHt.T, nu]))  # S⁻¹ [PHtᵀ | ν]
+                K = sol[:, :-1].T
+                x_i = x0 + K @ nu
+        self._x = x_i
         with _one_blas_thread(len(self._x)):
-            PHt = self._P[:, idx] @ H.T
-            S = H @ PHt[idx]
-            S = 0.5 * (S + S.T)
-            S[np.diag_indices(2 * m)] += self._var_img  # + R
-            sol = np.linalg.solve(S, np.column_stack([PHt.T, nu]))  # S⁻¹ [PHtᵀ | ν]
-            K = sol[:, :-1].T
-            self._x += K @ nu
             _add_sym_rank(self._P, 0.5 * (K @ S) - PHt, K)
+        nu = nu0
+        sol = np.linalg.solve(S, nu[:, None]) if iterations > 1 else sol[:, -1:]
         self._x[2] = wrap_angle(self._x[2])
         nis_total = float(nu @ sol[:, -1])
         nu2 = nu.reshape(m, 2)

@@ -1,0 +1,89 @@
+"""Knowing when it is lost: health conditions fire on faults and stay quiet on clean runs; recovery from a
+kidnap (issue: viewing direction and health)."""
+
+import csv
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from stablemarks.cli import main
+from stablemarks.health import HealthConfig, HealthMonitor
+from stablemarks.metrics import pose_nees
+from stablemarks.sim.export import write_simulated_sequence
+from stablemarks.sim.run import simulate_run
+
+
+@pytest.fixture(scope="module")
+def lab_seq(tmp_path_factory, lab_scenario):
+    return write_simulated_sequence(simulate_run(lab_scenario, seed=11), tmp_path_factory.mktemp("h") / "lab")
+
+
+def _log(out):
+    return [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
+
+
+def _edit(src, dst, column, change):
+    shutil.copytree(src, dst)
+    name = "odometry.csv" if column in ("x", "y") else "frames.csv"
+    with open(dst / name) as f:
+        rows = list(csv.DictReader(f))
+    for k, r in enumerate(rows):
+        r[column] = str(change(k, float(r[column])))
+    with open(dst / name, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return dst
+
+
+def test_a_clean_run_prints_no_warning(lab_seq, tmp_path, capsys):
+    assert main(["run", str(lab_seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    assert "warning:" not in capsys.readouterr().err
+    assert all(r["health"] == [] for r in _log(tmp_path / "out"))
+
+
+def test_a_kidnap_is_reported_within_three_frames_and_recovered(lab_seq, tmp_path, capsys):
+    seq = _edit(lab_seq, tmp_path / "kid", "y", lambda k, v: v + 0.5 if k > 10 else v)
+    assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    first = [line for line in err.splitlines() if line.startswith("warning: frame")]
+    assert first and "odometry_disagrees" in first[0] and int(first[0].split()[2]) <= 13
+    log = _log(tmp_path / "out")
+    poses = np.array([r["pose"] for r in log])
+    truth = np.array([r["true_pose"] for r in log])
+    covs = np.array([r["cov_pose"] for r in log])
+    assert pose_nees(poses[-1:], covs[-1:], truth[-1:])[0] < 11.34  # χ²₃ 99 %
+    dr = np.array([r["dead_reckoning"] for r in log])
+    after = slice(12, None)
+    ate = np.sqrt(np.mean(np.sum((poses[after, :2] - truth[after, :2]) ** 2, axis=1)))
+    ate_dr = np.sqrt(np.mean(np.sum((dr[after, :2] - truth[after, :2]) ** 2, axis=1)))
+    assert ate <= 0.5 * ate_dr
+
+
+def test_a_wrong_pan_is_reported_and_does_not_make_it_worse_than_dead_reckoning(lab_seq, tmp_path, capsys):
+    seq = _edit(lab_seq, tmp_path / "pan", "pan", lambda k, v: v + 0.2)
+    assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    first = [line for line in err.splitlines() if line.startswith("warning: frame")]
+    assert any("pan" in line for line in first), err
+    log = _log(tmp_path / "out")
+    poses, truth = np.array([r["pose"] for r in log]), np.array([r["true_pose"] for r in log])
+    dr = np.array([r["dead_reckoning"] for r in log])
+    err_est = np.sqrt(np.mean(np.sum((poses[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    err_dr = np.sqrt(np.mean(np.sum((dr[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    assert err_est <= err_dr * 1.05
+
+
+def test_the_monitor_counts_frames_in_a_row():
+    m = HealthMonitor(HealthConfig(blind_frames=3))
+    quiet = {"edges_missing": False, "nis_high": False, "disagree": False, "has_landmarks": True}
+    assert m.update(observed=False, **quiet) == [] and m.update(observed=False, **quiet) == []
+    assert m.update(observed=False, **quiet)[0].startswith("blind: no landmark observed for 3 frames")
+    assert m.update(observed=True, **quiet) == [] and not m.holds("blind")
+
+
+def test_health_settings_are_validated():
+    with pytest.raises(Exception, match="health.blind_frames: expected a positive integer"):
+        HealthConfig(blind_frames=0)

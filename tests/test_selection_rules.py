@@ -48,9 +48,13 @@ BOUNDARY = Boundary("w", "p1", np.zeros(2), np.ones(2), np.array([0.0, 4.0]), np
                     np.array([1.0, 0.0]))
 
 
+IDEAL = {"blur_sigma": 0, "vignetting": 0, "motion_blur": 0, "gain_sigma": 0, "shot_noise": 0}
+"""The rules are tested on a pinhole camera's sharp images: the contrast is then exactly what was painted."""
+
+
 def _scene(walls, features, start):
     return parse_scenario({"name": "rules", "camera": CAMERA, "walls": walls, "features": features,
-                           "robot": {"start": start}}, "test")
+                           "optics": IDEAL, "robot": {"start": start}}, "test")
 
 
 # ------------------------------------------------------------------ contrast

@@ -10,15 +10,31 @@ footprint on the wall (and over each row's height), so their edges are exact to 
 Shading (gray levels): ``albedo · (ambient + intensity · max(0, n·l)) + 255 · gloss · max(0, n·h)^shininess``
 with ``l`` the direction to the point light and ``h`` the Blinn-Phong half vector towards the camera — so a
 glossy whiteboard carries a highlight that moves with the viewpoint and differs between the two cameras.
-The pair is then scaled by a per-frame exposure gain ``exp(N(0, exposure_sigma²))``, gets independent
-Gaussian sensor noise of ``image_noise`` gray levels, and is rounded and clipped to ``uint8``.
+The camera's optics and sensor (:class:`~stablemarks.sim.scenario.Optics`, the same for both images) then
+turn this ideal irradiance into the recorded pair (:func:`expose`), in the order light takes:
+
+1. lens blur (a Gaussian point spread function of ``blur_sigma`` px) and horizontal motion blur (a box of a
+   per-frame length drawn uniformly in ``[0, motion_blur]`` px), one separable filter;
+2. vignetting: a cos⁴-like radial falloff ``(1 + (r/r₀)²)⁻²`` about the principal point, ``r₀`` chosen so
+   that the farthest corner keeps ``1 - vignetting`` of its light;
+3. the per-frame exposure ``e = exp(N(0, exposure_sigma²))``: the signal ``S = e·V·blur(I)``;
+4. sensor noise of variance ``image_noise² + shot_noise²·S/255`` (read noise plus Gaussian-approximated
+   photon shot noise), then the per-frame analog gain ``g = exp(N(0, gain_sigma²))`` amplifies signal and
+   noise alike;
+5. rounding and clipping to ``uint8``.
+
+The frame's random stream draws, in this order: the exposure, the left and then the right image's standard
+normal noise fields, the gain, the motion-blur length. With all optics zero this is exactly the ideal
+camera (exposure gain and constant Gaussian noise of ``image_noise``), image for image.
 """
 
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from ..errors import InputError, expected
@@ -57,19 +73,17 @@ class Renderer:
     def render(self, X, pan: float, rng: np.random.Generator) -> SimFrame:
         """The stereo pair from robot pose ``X`` (3,) with the head panned by ``pan`` [rad], and its truth.
 
-        ``rng`` draws the exposure gain and the sensor noise (in this order), so a seed fixes the images.
+        ``rng`` draws the frame's exposure, sensor noise, gain and motion blur (:func:`expose`), so a seed fixes
+        the images.
         """
         sc = self.scenario
         X = np.asarray(X, dtype=float)
         camera = sc.camera.with_pan(pan)
         left, right = self.render_clean(X, pan)
-        gain = float(np.exp(rng.normal(0.0, sc.lighting.exposure_sigma)))
-        images = []
-        for clean in (left, right):
-            noisy = clean * gain + rng.normal(0.0, sc.image_noise, clean.shape)
-            images.append(np.clip(np.rint(noisy), 0, 255).astype(np.uint8))
-        truth = frame_truth(self.world, camera, SE2.from_array(X), left_clean=left, exposure=gain)
-        return SimFrame(images[0], images[1], truth)
+        (img_l, img_r), drawn = expose((left, right), sc, rng)
+        truth = frame_truth(self.world, camera, SE2.from_array(X), left_clean=left, exposure=drawn.exposure,
+                            gain=drawn.gain, motion_blur=drawn.motion_blur)
+        return SimFrame(img_l, img_r, truth)
 
     def render_clean(self, X, pan: float) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free ``(left, right)`` float32 images (H, W) [gray levels, not clipped] at unit exposure."""
@@ -257,6 +271,102 @@ def _footprint_mean(feat: Feature, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
     with np.errstate(divide="ignore", invalid="ignore"):
         mean = (_antiderivative(feat, b) - _antiderivative(feat, a)) / width
     return np.where(np.isfinite(mean) & (width > 0), mean, 0.0)
+
+
+# --------------------------------------------------------------- optics and sensor
+@dataclass(frozen=True)
+class FrameOptics:
+    """The per-frame random draws of :func:`expose`: exposure and analog gain factors, motion-blur length [px]."""
+
+    exposure: float = 1.0
+    gain: float = 1.0
+    motion_blur: float = 0.0
+
+
+def expose(clean: tuple[np.ndarray, ...], scenario: Scenario,
+           rng: np.random.Generator) -> tuple[tuple[np.ndarray, ...], FrameOptics]:
+    """Record ideal images ``clean`` (H, W) float32 [gray levels] through the scenario's optics and sensor.
+
+    All images (the stereo pair) share the frame's optics and draws; each gets its own noise field. Returns the
+    ``uint8`` images and the frame's draws (order of the draws in the module docstring).
+    """
+    op, read = scenario.optics, scenario.image_noise
+    exposure = float(np.exp(rng.normal(0.0, scenario.lighting.exposure_sigma)))
+    normals = [rng.normal(0.0, 1.0, c.shape) for c in clean]
+    gain = float(np.exp(rng.normal(0.0, op.gain_sigma))) if op.gain_sigma > 0 else 1.0
+    length = float(op.motion_blur * rng.random()) if op.motion_blur > 0 else 0.0
+    kernels = blur_kernels(op.blur_sigma, length)
+    images = []
+    for image, z in zip(clean, normals, strict=True):
+        if kernels is not None:
+            image = cv2.sepFilter2D(image, -1, kernels[0], kernels[1], borderType=cv2.BORDER_REFLECT)
+        if op.vignetting > 0:
+            signal = image * (vignetting_map(image.shape, scenario.camera.cu, scenario.camera.cv, op.vignetting)
+                              * np.float32(exposure))
+        else:
+            signal = image * exposure
+        if op.shot_noise > 0:
+            variance = np.float32(read * read) + np.float32(op.shot_noise ** 2 / 255.0) * np.maximum(signal, 0)
+            sigma = np.sqrt(variance) * np.float32(gain)
+        else:
+            sigma = read * gain
+        recorded = (signal * gain if gain != 1.0 else signal) + z * sigma
+        images.append(np.clip(np.rint(recorded), 0, 255).astype(np.uint8))
+    return tuple(images), FrameOptics(exposure, gain, length)
+
+
+def blur_kernels(sigma: float, length: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Separable ``(horizontal, vertical)`` kernels of a Gaussian PSF of ``sigma`` [px] and a horizontal box of
+    ``length`` [px] (pixel-integrated); ``None`` when both are nothing."""
+    box = _box_kernel(length)
+    if sigma <= 0 and length <= 1e-6:
+        return None
+    gauss = _gauss_kernel(sigma)
+    return np.convolve(gauss, box).astype(np.float32), gauss.astype(np.float32)
+
+
+def _gauss_kernel(sigma: float) -> np.ndarray:
+    if sigma <= 0:
+        return np.ones(1)
+    half = max(1, math.ceil(3.0 * sigma))
+    return cv2.getGaussianKernel(2 * half + 1, sigma, cv2.CV_64F).ravel()
+
+
+def _box_kernel(length: float) -> np.ndarray:
+    """Discrete kernel of a centred horizontal box of ``length`` [px] acting on a pixel image.
+
+    The image is read as the linear interpolation of its pixels (a triangle kernel), smeared by the box and
+    sampled again: ``w_j = (T(j + L/2) - T(j - L/2)) / L`` with ``T`` the triangle's integral. ``[1]`` for
+    ``L = 0``; the weights change continuously with ``L``.
+    """
+    if length <= 1e-6:
+        return np.ones(1)
+    half = math.ceil(length / 2 + 1) - 1
+    j = np.arange(-half, half + 1, dtype=float)
+    w = (_tri_integral(j + length / 2) - _tri_integral(j - length / 2)) / length
+    return w / w.sum()
+
+
+def _tri_integral(x: np.ndarray) -> np.ndarray:
+    """``∫_{-∞}^{x} max(0, 1 - |t|) dt``."""
+    x = np.clip(x, -1.0, 1.0)
+    return np.where(x < 0, 0.5 * (x + 1) ** 2, 1.0 - 0.5 * (1 - x) ** 2)
+
+
+@functools.lru_cache(maxsize=8)
+def vignetting_map(shape: tuple[int, int], cu: float, cv: float, vignetting: float) -> np.ndarray:
+    """Relative illumination (H, W) float32: ``(1 + (r/r₀)²)⁻²`` about ``(cu, cv)``, ``1 - vignetting`` in the
+    farthest corner."""
+    H, W = shape
+    rc2 = max((u - cu) ** 2 + (v - cv) ** 2 for u in (0, W - 1) for v in (0, H - 1))
+    if vignetting <= 0 or rc2 == 0:
+        return np.ones(shape, dtype=np.float32)
+    r0_2 = rc2 / ((1.0 - vignetting) ** -0.5 - 1.0)
+    u = (np.arange(W) - cu) ** 2
+    v = (np.arange(H) - cv) ** 2
+    out = (1.0 / (1.0 + (v[:, None] + u[None, :]) / r0_2) ** 2).astype(np.float32)
+    out.flags.writeable = False
+    return out
 
 
 @functools.lru_cache(maxsize=4)

@@ -19,7 +19,7 @@ Format (defaults in parentheses)::
       mount_x: 0.0                  # left optical centre (pan axis) in the robot frame [m]
       mount_y: 0.0
       mount_height: 1.0             # [m]
-      image_noise: 2.0              # σ of Gaussian sensor noise [gray levels] (2.0)
+      image_noise: 2.0              # σ of the signal-independent (read) sensor noise [gray levels] (2.0)
       pan_limits_deg: [-60, 60]     # mechanical pan range ([-90, 90])
     room:                           # optional
       floor: {kind: noise, base: 90, contrast: 12, scale: 0.08}       # texture in world (x, y)
@@ -32,6 +32,14 @@ Format (defaults in parentheses)::
       light_intensity: 0.3          # diffuse fraction at normal incidence (0.3)
       shininess: 30                 # Blinn-Phong exponent of glossy highlights (30)
       exposure_sigma: 0.03          # σ of the per-frame log exposure gain (0.0)
+    optics:                         # optional; the defaults model a real camera, all zeros the ideal one
+      blur_sigma: 0.5               # σ of the lens's Gaussian point spread function [px] (0.5)
+      vignetting: 0.25              # light lost in the image corners, cos⁴-like radial falloff, 0–0.9 (0.25)
+      motion_blur: 1.0              # longest horizontal motion blur [px]; each frame draws its length
+                                    # uniformly in [0, motion_blur] (1.0)
+      gain_sigma: 0.04              # σ of the per-frame log analog gain (0.04)
+      shot_noise: 2.0               # σ of photon shot noise at gray level 255 and unit gain [gray levels];
+                                    # at gray level I it is shot_noise·sqrt(I/255) (2.0)
     walls:                          # vertical planes standing on the floor segment p1 → p2
       - id: partition               # letters, digits, '_' or '-'; unique among walls, boxes and poles
         name: partition             # (the id)
@@ -74,6 +82,11 @@ Format (defaults in parentheses)::
 
 A texture is ``{kind: noise | plain, base: 0–255, contrast: σ in gray levels, scale: blob size [m]}``
 (defaults: noise, 128, 10, 0.03); ``plain`` ignores ``contrast`` and ``scale``.
+
+``camera.image_noise`` is the signal-independent (read) noise; with ``optics.shot_noise`` the noise of a
+pixel of mean gray level ``I`` (before the analog gain ``g``) is ``g·sqrt(image_noise² + shot_noise²·I/255)``.
+With ``optics: {blur_sigma: 0, vignetting: 0, motion_blur: 0, gain_sigma: 0, shot_noise: 0}`` the renderer
+makes exactly the images of the ideal camera (exposure jitter and constant Gaussian noise only).
 """
 
 from __future__ import annotations
@@ -190,6 +203,28 @@ class Lighting:
 
 
 @dataclass(frozen=True)
+class Optics:
+    """The camera's imperfections beyond the pinhole: lens blur, vignetting, motion blur, gain, shot noise.
+
+    ``blur_sigma`` [px]: σ of the Gaussian point spread function; ``vignetting``: fraction of the light lost
+    in the farthest image corner (a cos⁴-like radial falloff); ``motion_blur`` [px]: the longest horizontal
+    box kernel (each frame draws its length uniformly in ``[0, motion_blur]``); ``gain_sigma``: σ of the
+    per-frame log analog gain; ``shot_noise`` [gray levels]: σ of the photon shot noise at gray level 255.
+    """
+
+    blur_sigma: float = 0.5
+    vignetting: float = 0.25
+    motion_blur: float = 1.0
+    gain_sigma: float = 0.04
+    shot_noise: float = 2.0
+
+    @classmethod
+    def ideal(cls) -> Optics:
+        """No optics at all: the renderer's images are those of a pinhole camera with constant noise."""
+        return cls(0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
 class Room:
     """Floor, optional ceiling, and the gray level of rays that hit nothing."""
 
@@ -233,6 +268,7 @@ class Scenario:
     boxes: tuple[Box, ...] = ()
     poles: tuple[Pole, ...] = ()
     lighting: Lighting = Lighting()
+    optics: Optics = Optics()
     room: Room = Room()
     robot: RobotPlan = RobotPlan()
     source: str = field(default="", compare=False)
@@ -363,9 +399,10 @@ _FEATURE = ("id", "wall", "s", "z", "kind", "contrast", "fade", "width")
 _BOX = ("id", "center", "size", "yaw_deg", "height", "texture")
 _POLE = ("id", "center", "radius", "height", "texture")
 _LIGHTING = ("ambient", "light_position", "light_intensity", "shininess", "exposure_sigma")
+_OPTICS = ("blur_sigma", "vignetting", "motion_blur", "gain_sigma", "shot_noise")
 _ROOM = ("floor", "ceiling_height", "ceiling", "background")
 _ROBOT = ("start", "path", "frame_spacing", "frame_turn_deg", "odometry", "pan")
-_TOP = ("name", "seed", "camera", "room", "lighting", "walls", "features", "clutter", "robot")
+_TOP = ("name", "seed", "camera", "room", "lighting", "optics", "walls", "features", "clutter", "robot")
 
 
 def parse_scenario(data: object, source: str = "scenario", *, default_name: str = "scenario") -> Scenario:
@@ -399,6 +436,7 @@ def parse_scenario(data: object, source: str = "scenario", *, default_name: str 
         boxes=boxes,
         poles=poles,
         lighting=_lighting(top.child("lighting", _LIGHTING)),
+        optics=_optics(top.child("optics", _OPTICS)),
         room=_room(top.child("room", _ROOM)),
         robot=_robot(top.child("robot", _ROBOT), pan_limits),
         source=source,
@@ -506,6 +544,17 @@ def _lighting(n: _Node) -> Lighting:
         light_intensity=n.number("light_intensity", d.light_intensity, lo=0.0),
         shininess=n.number("shininess", d.shininess, positive=True),
         exposure_sigma=n.number("exposure_sigma", d.exposure_sigma, lo=0.0),
+    )
+
+
+def _optics(n: _Node) -> Optics:
+    d = Optics()
+    return Optics(
+        blur_sigma=n.number("blur_sigma", d.blur_sigma, lo=0.0),
+        vignetting=n.number("vignetting", d.vignetting, lo=0.0, hi=0.9),
+        motion_blur=n.number("motion_blur", d.motion_blur, lo=0.0),
+        gain_sigma=n.number("gain_sigma", d.gain_sigma, lo=0.0),
+        shot_noise=n.number("shot_noise", d.shot_noise, lo=0.0),
     )
 
 

@@ -80,12 +80,18 @@ class EdgeTruth:
 
 @dataclass(frozen=True)
 class FrameTruth:
-    """True pose ``X`` (world), head pan [rad], exposure gain, and the frame's image edges."""
+    """True pose ``X`` (world), head pan [rad], the frame's image edges, and its optics draws.
+
+    ``exposure`` and ``gain``: the frame's exposure and analog gain factors; ``motion_blur``: the length [px] of
+    its horizontal motion blur (see :func:`stablemarks.sim.render.expose`).
+    """
 
     pose: SE2
     pan: float
     exposure: float
     edges: tuple[EdgeTruth, ...]
+    gain: float = 1.0
+    motion_blur: float = 0.0
 
     def edge(self, edge_id: str) -> EdgeTruth:
         for e in self.edges:
@@ -98,6 +104,8 @@ class FrameTruth:
             "pose": self.pose.as_array().tolist(),
             "pan": self.pan,
             "exposure": self.exposure,
+            "gain": self.gain,
+            "motion_blur": self.motion_blur,
             "edges": [e.to_dict() for e in self.edges],
         }
 
@@ -117,7 +125,7 @@ def _edge_list(world: World) -> list[tuple[str, str, str, str, float, tuple[floa
 
 
 def frame_truth(world: World, camera: StereoCamera, X: SE2, *, left_clean: np.ndarray | None = None,
-                exposure: float = 1.0) -> FrameTruth:
+                exposure: float = 1.0, gain: float = 1.0, motion_blur: float = 0.0) -> FrameTruth:
     """The ground truth of the frame taken from pose ``X`` with ``camera`` (its ``pan`` set).
 
     ``left_clean`` (H, W), the noise-free left image, gives the polarity of boundary edges (the background
@@ -164,7 +172,7 @@ def frame_truth(world: World, camera: StereoCamera, X: SE2, *, left_clean: np.nd
             polarity, float(u_l), float(u_r), float(v_top), float(v_bot), views[0], views[1],
             fractions[0], fractions[1],
         ))
-    return FrameTruth(X, float(camera.pan), float(exposure), tuple(edges))
+    return FrameTruth(X, float(camera.pan), float(exposure), tuple(edges), float(gain), float(motion_blur))
 
 
 def _measured_polarity(image: np.ndarray | None, u: float, rows: np.ndarray, step: float = 2.0,

@@ -87,7 +87,8 @@ def test_source_defaults_fill_only_what_the_user_left_at_the_default():
 def test_the_resolved_configuration_loads_again(tmp_path):
     import yaml
 
-    config = Config().with_overrides({"sad": {"block_size": 11}, "pan": {"limits_deg": [-60, 60]}})
+    config = Config().with_overrides({"sad": {"block_size": 11},
+                                      "pan": {"limits": [-1.0, 1.0], "policy": "information"}})
     path = tmp_path / "config.yaml"
     path.write_text(yaml.safe_dump(config.to_dict()))
     assert load_config(path) == config
@@ -96,8 +97,8 @@ def test_the_resolved_configuration_loads_again(tmp_path):
 @pytest.mark.parametrize(("doc", "match"), [
     ({"noise": {"sigma_img": -1}}, r"noise: noise\.sigma_img: expected a positive number"),
     ({"noise": {"sigma_img": "x"}}, r"noise\.sigma_img: expected a number"),
-    ({"pan": {"policy": "wander"}}, r"pan\.policy: expected one of fixed, free_edges"),
-    ({"pan": {"limits_deg": [30, -30]}}, r"pan\.limits_deg: expected \[min, max\]"),
+    ({"pan": {"policy": "wander"}}, r"pan\.policy: expected one of fixed, free_edges, information"),
+    ({"pan": {"limits": [0.5, -0.5]}}, r"pan\.limits: expected \[min, max\]"),
     ({"odometry": {"trans_per_m": -0.1}}, r"odometry\.trans_per_m: expected a non-negative number"),
     ({"ekf": {"sigma_img": 0.5}}, r"ekf\.sigma_img: unknown setting"),
 ])

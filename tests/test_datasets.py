@@ -173,7 +173,8 @@ def test_kitti_run_from_the_command_line(tmp_path, lab_map):
 def test_kitti_without_odometry_says_it_is_required(tmp_path, lab_map):
     seq = write_kitti(tmp_path, odometry=False)
     with pytest.raises(SequenceError, match=r"07: KITTI has no wheel odometry: put an odometry\.csv "
-                                            r"\(stamp,x,y,theta\) in the folder or pass `odometry` \(an odometry CSV\)"):
+                                            r"\(stamp,x,y,theta\) in the folder or pass `odometry` "
+                                            r"\(an odometry CSV\)"):
         open_source(seq, map=lab_map)
     write_odometry_csv(tmp_path / "odo.csv", PERIOD * np.arange(N_FRAMES), lab_odometry())
     assert len(open_source(seq, map=lab_map, odometry=tmp_path / "odo.csv")) == N_FRAMES

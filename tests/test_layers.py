@@ -11,7 +11,8 @@ import stablemarks
 
 PACKAGE = Path(stablemarks.__file__).parent
 
-CORE = {"errors", "geometry", "maps", "motion", "config", "frames", "health", "vision", "planes", "landmarks", "pipeline",
+CORE = {"errors", "geometry", "maps", "motion", "config", "frames", "health", "viewing", "vision", "planes",
+        "landmarks", "pipeline",
         "estimation", "methods", "localizer", "online", "metrics", "reference"}
 LAYERS = [CORE, {"io"}, {"sim"}, {"evaluation", "smoother", "bench", "noisefit"}, {"viz"}, {"commands", "cli"}]
 """Each layer may import its own and the layers before it, never a later one."""

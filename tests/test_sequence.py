@@ -19,10 +19,10 @@ from stablemarks.errors import InputError, SequenceError
 from stablemarks.geometry import SE2, StereoCamera, wrap_angle
 from stablemarks.io.calibration import StereoCalibration
 from stablemarks.io.sequence import FRAME_PERIOD, load_sequence, write_sequence
-from stablemarks.sim.export import write_simulated_sequence
 from stablemarks.io.trajectory import write_tum
 from stablemarks.maps import Map, ReferencePlane
 from stablemarks.sim import parse_scenario, simulate_run
+from stablemarks.sim.export import write_simulated_sequence
 from stablemarks.sim.scenario import SCENARIO_DIR
 
 

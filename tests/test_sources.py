@@ -14,7 +14,7 @@ import pytest
 from stablemarks.errors import InputError, SequenceError
 from stablemarks.geometry import SE2, wrap_angle
 from stablemarks.io.calibration import save_camera_info_pair
-from stablemarks.io.sequence import write_sequence
+from stablemarks.io.sequence import SequenceSource, write_sequence
 from stablemarks.io.sources import (
     check_stamps,
     match_stamps,
@@ -24,7 +24,6 @@ from stablemarks.io.sources import (
     yaw_of_quaternion,
 )
 from stablemarks.maps import Map, ReferencePlane
-from stablemarks.io.sequence import SequenceSource
 
 N_FRAMES = 4
 T0 = 1_700_000_000.0

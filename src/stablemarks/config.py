@@ -4,7 +4,7 @@ A configuration file holds any subset of the sections below; everything left out
 
     noise:     {sigma_img: 0.5}                                  # the line-column noise σ_img [px] (Sec 2.3.1)
     odometry:  {trans_per_m: 0.05, rot_per_m_deg: 2.0, rot_per_rad: 0.05, trans_per_rad: 0.005}
-    pan:       {policy: free_edges, angle_deg: 0.0, limits_deg: [-90, 90]}
+    pan:       {policy: free_edges, angle: 0.0, limits: [-1.5708, 1.5708], max_rate: 1.0472}   # rad, rad/s
     segments:  {gradient_threshold: 40, min_length: 20}
     matching:  {min_similarity: 0.5}
     sad:       {block_size: 15, num_disparities: 64, lr_tolerance: 1.0}
@@ -35,8 +35,9 @@ from .geometry import StereoCamera
 from .health import HealthConfig
 from .landmarks import LandmarkConfig
 from .maps import read_yaml
-from .motion import OdometryNoise, PanConfig
+from .motion import OdometryNoise
 from .planes import PlaneConfig
+from .viewing import PanConfig
 from .vision.area_stereo import SADConfig
 from .vision.segment_stereo import MatchConfig
 from .vision.segments import SegmentConfig

@@ -35,8 +35,8 @@ from .geometry import SE2, StereoCamera
 from .health import HealthMonitor
 from .maps import Map
 from .methods import Entered, Method, method_named
-from .motion import choose_pan
 from .pipeline import FrameLandmarks, FrontEnd, check_pair, run_front_end
+from .viewing import choose_pan
 
 DEFAULT_START_COV = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
 """Covariance of the start pose when none is given: σ = 5 cm, 5 cm, 1° over ``(x, y, theta)``."""
@@ -205,6 +205,8 @@ class Localizer:
         """Landmarks dropped from the filter, as they were when dropped (id → estimate)."""
         self._odometry: SE2 | None = None
         self._pan: float | None = None
+        self._stamp: float | None = None
+        self._dt: float | None = None
         self._index = 0
 
     # ----------------------------------------------------------------- state
@@ -298,7 +300,7 @@ class Localizer:
         _, U = self._increment(odometry)
         if U is not None:
             X = motion(X, U)
-        return choose_pan(self.config.pan, self.world_map, self.camera, X, self._pan)
+        return choose_pan(self.config.pan, self.world_map, self.camera, X, self._pan, ekf=self.ekf, dt=self._dt)
 
     def step(self, stamp: float, left: np.ndarray, right: np.ndarray, *, odometry=None, pan: float = 0.0
              ) -> Estimate:
@@ -379,6 +381,9 @@ class Localizer:
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
             timings["select"] = time.perf_counter() - t3
         self._pan = pan
+        if self._stamp is not None and stamp > self._stamp:
+            self._dt = float(stamp) - self._stamp
+        self._stamp = float(stamp)
         self._index += 1
         record.pose, record.cov_pose = self.ekf.pose, self.ekf.cov_pose
         record.n_landmarks = self.ekf.n_landmarks

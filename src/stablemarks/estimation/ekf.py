@@ -501,6 +501,17 @@ class JointEKF:
             P[:3, 3:] = F @ P[:3, 3:]
             P[3:, :3] = P[:3, 3:].T
 
+    @contextlib.contextmanager
+    def linearised_at(self, pose):
+        """A context in which the filter's pose mean is ``pose`` (3,) (covariance unchanged), to predict
+        observations and information from another pose (the next frame's, for the pan choice); restored after."""
+        saved = self._x[:3].copy()
+        self._x[:3] = np.asarray(pose, dtype=float)
+        try:
+            yield self
+        finally:
+            self._x[:3] = saved
+
     def inflate_pose(self, factor: float) -> None:
         """Widen the pose covariance: ``P_XX ← factor · P_XX`` (``factor ≥ 1``), cross-covariances kept. The
         change adds the PSD block ``(factor − 1) P_XX``, so ``P`` stays PSD (recovery from a slip or kidnap)."""

@@ -9,7 +9,6 @@ a command the run's own pans are used (the scenario's policy applied to dead rec
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable, Iterator
 
 import numpy as np
@@ -42,8 +41,8 @@ class SimulatedSource:
         lo, hi = self.scenario.pan_limits
         self.config_defaults = {
             "odometry": dataclasses.asdict(self.scenario.robot.odometry),
-            "pan": {"policy": "fixed" if plan.policy == "fixed" else "free_edges",
-                    "angle_deg": math.degrees(plan.angle), "limits_deg": [math.degrees(lo), math.degrees(hi)]},
+            "pan": {"policy": "fixed" if plan.policy == "fixed" else "free_edges", "angle": float(plan.angle),
+                    "limits": [float(lo), float(hi)]},
         }
 
     def __len__(self) -> int:

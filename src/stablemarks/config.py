@@ -26,6 +26,7 @@ settings derived from them (:data:`DERIVED`) cannot be set on their own.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
@@ -68,17 +69,24 @@ class NoiseConfig:
     filter's observation noise (Eq 20)."""
 
     boundary_px: float | None = None
-    """σ of a planar region's border in the disparity images [px]: where block matching puts a depth edge
-    (Sec 3.2's boundary), shared by both images. None: a uniform allowance over the SAD window,
-    ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which reproduces Table 1's σ)."""
+    """σ of a boundary's column when a member segment marks the edge (Sec 3.2: the boundary moved to the
+    outermost segment) [px], shared by both images, beyond the rows' spread and the line noise. None: a uniform
+    allowance over the SAD window, ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which
+    reproduces Table 1's σ)."""
+    free_boundary_px: float | None = None
+    """The same when no segment marks the edge and the boundary is the planar region's border itself: block
+    matching moves a depth edge by up to half its window, mostly inward (measured: 4–6 px RMS with 15 px).
+    None: ``sad.block_size / sqrt(12)``."""
 
     def __post_init__(self) -> None:
         v = self.sigma_img
         if isinstance(v, bool) or not isinstance(v, int | float) or not (v == v and 0 < v < 1e3):
             raise ConfigError(expected("a positive number of pixels below 1000", v, where="noise.sigma_img"))
-        v = self.boundary_px
-        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float) or not (v == v and 0 <= v < 1e3)):
-            raise ConfigError(expected("null or a number of pixels in [0, 1000)", v, where="noise.boundary_px"))
+        for name in ("boundary_px", "free_boundary_px"):
+            v = getattr(self, name)
+            bad = isinstance(v, bool) or not isinstance(v, int | float) or not (v == v and 0 <= v < 1e3)
+            if v is not None and bad:
+                raise ConfigError(expected("null or a number of pixels in [0, 1000)", v, where=f"noise.{name}"))
 
 
 DERIVED = {
@@ -165,11 +173,16 @@ class Config:
 
 
 PRESETS = {
-    "paper": {"noise": {"sigma_img": 0.5, "boundary_px": None}},
+    "paper": {"noise": {"sigma_img": 0.5, "boundary_px": None, "free_boundary_px": None}},
 }
 """Named configurations: ``paper`` — the paper's σ_img = 0.5 px (Sec 2.3.1) and a boundary known to within the
 SAD window (``w / sqrt(12)``), which reproduce Table 1's σ; the defaults are measured instead
 (``stablemarks calibrate-noise``)."""
+
+
+MAX_SETTING = 1e9
+"""Largest magnitude of a numeric setting: no threshold, count or σ of the pipeline comes near it, and below
+it every setting converts to a float or an int64 exactly enough."""
 
 
 def parse_config(data: object, source: str = "config", base: Config | None = None) -> Config:
@@ -202,6 +215,15 @@ def parse_config(data: object, source: str = "config", base: Config | None = Non
             if isinstance(default, int | float) and not isinstance(default, bool):
                 if isinstance(value, bool) or not isinstance(value, int | float):
                     raise ConfigError(expected("a number", value, where=f"{source}: {name}.{key}"))
+                try:
+                    finite = math.isfinite(value)
+                except OverflowError:  # an integer beyond the float range
+                    finite = False
+                if not finite:
+                    raise ConfigError(expected("a finite number", value, where=f"{source}: {name}.{key}"))
+                if abs(value) > MAX_SETTING:
+                    raise ConfigError(expected(f"a number within ±{MAX_SETTING:g}", value,
+                                               where=f"{source}: {name}.{key}"))
                 if isinstance(default, int) and not isinstance(default, bool) and float(value) != int(value):
                     raise ConfigError(expected("a whole number", value, where=f"{source}: {name}.{key}"))
                 value = type(default)(value)
@@ -210,7 +232,7 @@ def parse_config(data: object, source: str = "config", base: Config | None = Non
             updates[name] = replace(current, **clean)
         except InputError as exc:
             raise ConfigError(f"{source}: {name}: {exc}") from None
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, ArithmeticError) as exc:  # ArithmeticError: a number out of range
             raise ConfigError(f"{source}: {name}: {exc}") from None
     return replace(base, **updates)
 

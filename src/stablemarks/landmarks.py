@@ -342,7 +342,7 @@ def search_boundary(
     config: LandmarkConfig = LandmarkConfig(),
     plane_config: PlaneConfig = PlaneConfig(),
     window_px: float = 15.0,
-    border_sigma_px: float | None = None,
+    border_sigma_px: float | tuple[float | None, float | None] | None = None,
     bridge_px: int | None = None,
 ) -> Boundary | None:
     """Find a free edge of a fitted plane in both images (Sec 3.2) → ``P_b, Σ_Pb`` on the plane.
@@ -350,9 +350,12 @@ def search_boundary(
     ``members_u`` (k, 2): left and right columns of the plane's member segment pairs, for the rule that
     a boundary found inside the outermost segment is moved to it. Returns None when the region does not
     reach the search window in the left image. ``window_px``: the SAD window width used when
-    ``config.boundary_window_px`` is None. ``border_sigma_px``: σ [px] of the planar region's border in the
-    disparity images (``noise.boundary_px``), shared by both images; None: a uniform allowance over the
-    window, ``w / sqrt(12)``. ``bridge_px``: the widest hole in the region a row's run is followed across
+    ``config.boundary_window_px`` is None. ``border_sigma_px``: σ [px] of the boundary's column beyond the rows'
+    spread and the line noise, shared by both images: ``(snapped, free)`` — when the boundary was moved onto a
+    member segment at the edge (``noise.boundary_px``) and when it is the region's border itself
+    (``noise.free_boundary_px``; block matching moves a depth edge by up to half the window), or one value for
+    both; None: a uniform allowance over the window, ``w / sqrt(12)``.
+    ``bridge_px``: the widest hole in the region a row's run is followed across
     (default ``w // 2``, pixels the disparity checks left out; :func:`landmarks_on_plane` allows the whole
     window where the map has no other wall beyond the edge, so that a textureless strip just inside the edge,
     a joint or a door frame, does not end the region early).
@@ -408,7 +411,9 @@ def search_boundary(
         var_b[img] = var + camera.sigma_img**2
     # The window term is one physical effect seen by both disparity images (the window straddling the
     # depth edge shifts the region's border the same way in 3D): it is shared, fully correlated.
-    var_w = w**2 / 12.0 if border_sigma_px is None else float(border_sigma_px) ** 2
+    border = border_sigma_px if isinstance(border_sigma_px, tuple) else (border_sigma_px, border_sigma_px)
+    border = border[0] if snapped else border[1]
+    var_w = w**2 / 12.0 if border is None else float(border) ** 2
     cov_uv = np.diag(var_b) + var_w
     sigma_u = np.sqrt(np.diag(cov_uv))
     P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
@@ -583,7 +588,7 @@ def landmarks_on_plane(
     world_map: Map | None = None,
     *,
     cov_X=None,
-    border_sigma_px: float | None = None,
+    border_sigma_px: float | tuple[float | None, float | None] | None = None,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection.
 

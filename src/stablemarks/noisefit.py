@@ -9,10 +9,11 @@ estimates, frame by frame at the *true* pose:
     normal, divided by its σ for ``σ_img = 1 px`` (first order, :meth:`StereoCamera.triangulate`), is a
     sample of ``N(0, σ_img²)``. The estimate is their RMS after gross outliers (lines of clutter standing
     in front of a wall) are clipped (:func:`clipped_rms`).
-``noise.boundary_px``
-    the σ of a planar region's border [px]: each boundary found (Sec 3.2) is compared with the column where
-    the true pose projects the map's free edge, in both images; what its squared error holds beyond the
-    modelled row spread and line noise is the border's own variance (median-based, floored at 0).
+``noise.boundary_px``, ``noise.free_boundary_px``
+    the σ of a boundary's column [px], when a segment marks the edge (snapped, Sec 3.2) and when the planar
+    region's border itself does: each boundary found is compared with the column where the true pose projects
+    the map's free edge, in both images; what its mean squared error (gross outliers clipped) holds beyond the
+    modelled row spread and line noise is the border's own variance (floored at 0).
 ``odometry``
     the random-walk noise of wheel odometry: each increment's error against the true increment, split into
     Thrun's ``rot1, trans, rot2`` (:func:`stablemarks.motion.decompose`), regressed (non-negative least
@@ -52,9 +53,9 @@ class NoiseSamples:
 
     line_z: list[float] = field(default_factory=list)
     """Offsets of on-plane lines from the mapped wall divided by their σ at ``σ_img = 1`` px."""
-    boundary_err2: list[float] = field(default_factory=list)
-    """Squared column errors of found boundaries [px²], both images."""
-    boundary_model2: list[float] = field(default_factory=list)
+    boundary_err: dict = field(default_factory=lambda: {True: [], False: []})
+    """Column errors of found boundaries [px], both images, by whether they were snapped to a segment."""
+    boundary_model2: dict = field(default_factory=lambda: {True: [], False: []})
     """Their modelled variance without the border term (row spread and line noise) [px²]."""
     odometry: list[tuple[float, float, float, float, float, float]] = field(default_factory=list)
     """Per increment ``(|rot1|, |trans|, |rot2|, e_rot1, e_trans, e_rot2)`` [rad, m]."""
@@ -62,8 +63,9 @@ class NoiseSamples:
 
     def extend(self, other: NoiseSamples) -> None:
         self.line_z += other.line_z
-        self.boundary_err2 += other.boundary_err2
-        self.boundary_model2 += other.boundary_model2
+        for k in (True, False):
+            self.boundary_err[k] += other.boundary_err[k]
+            self.boundary_model2[k] += other.boundary_model2[k]
         self.odometry += other.odometry
         self.frames += other.frames
 
@@ -127,13 +129,13 @@ def _image_samples(out: NoiseSamples, frame, T, camera, unit, world_map, config:
                 continue
             b = search_boundary(camera, fit, edge, front.disparity.right, members_u, config.landmarks, config.planes,
                                 float(config.sad.block_size), border_sigma_px=0.0)
-            if b is None or b.snapped:
+            if b is None:
                 continue
             true_u = camera.project_columns(T, plane.edge(edge))
             err = b.u - true_u
             if np.all(np.isfinite(err)) and np.all(np.abs(err) < 3 * config.sad.block_size):
-                out.boundary_err2 += list(err**2)
-                out.boundary_model2 += list(b.sigma_u**2)
+                out.boundary_err[bool(b.snapped)] += list(err)
+                out.boundary_model2[bool(b.snapped)] += list(b.sigma_u**2)
 
 
 def clipped_rms(z, k: float = 4.0, iterations: int = 10) -> float:
@@ -159,9 +161,11 @@ def estimate(samples: NoiseSamples) -> dict:
     z = np.asarray(samples.line_z)
     if len(z) >= 10:
         doc["noise"]["sigma_img"] = round(clipped_rms(z), 4)
-    if len(samples.boundary_err2) >= 4:
-        excess = np.median(samples.boundary_err2) / 0.455 - np.median(samples.boundary_model2)  # χ²₁ median
-        doc["noise"]["boundary_px"] = round(float(np.sqrt(max(excess, 0.0))), 3)
+    for snapped, key in ((True, "boundary_px"), (False, "free_boundary_px")):
+        err = np.asarray(samples.boundary_err[snapped])
+        if len(err) >= 4:
+            excess = clipped_rms(err) ** 2 - float(np.mean(samples.boundary_model2[snapped]))
+            doc["noise"][key] = round(float(np.sqrt(max(excess, 0.0))), 3)
     o = np.asarray(samples.odometry, dtype=float).reshape(-1, 6)
     r1, tr, r2, e1, et, e2 = o.T
     turn = r1 + r2
@@ -196,16 +200,17 @@ class Consistency:
 
 
 def consistency(runs: Sequence) -> Consistency:
-    """Pose NEES (per frame averaged over the runs; the fraction of frames inside the 95 % bounds of that
-    average), mean NIS and, for runs with ground truth of their landmarks, mean landmark NEES along the wall.
+    """Pose NEES over all frames of all runs (mean, and the fraction of frames inside the 95 % bounds of one
+    frame's NEES, 3 dof), mean NIS and, for runs with ground truth of their landmarks, mean landmark NEES along
+    the wall at the end of each run.
 
     ``runs``: ``(OnlineResult, edges)`` with ``edges`` the true image edges by id (or None)."""
-    nees_rows, nis, lm_nees, ates = [], [], [], []
+    nees, nis, lm_nees, ates = [], [], [], []
     for result, edges in runs:
         T = result.true_poses
         if T is None:
             raise InputError(f"{result.name}: no ground truth poses: the consistency needs them")
-        nees_rows.append(pose_nees(result.poses, result.covs, T))
+        nees += list(pose_nees(result.poses, result.covs, T))
         nis += [v for r in result.records for v in r.nis]
         ates.append(float(np.sqrt(np.mean(np.sum((result.poses[:, :2] - T[:, :2]) ** 2, axis=1)))))
         for lid, tid in result.truth_of.items():
@@ -214,11 +219,10 @@ def consistency(runs: Sequence) -> Consistency:
             lm, e = result.ekf.landmark(lid), edges[tid]
             plane = result.world_map[lm.plane_id]
             lm_nees.append(float(along_wall_nees(lm.position, lm.cov2d, np.array([e.x, e.y]), plane.direction)[0]))
-    n = min(len(r) for r in nees_rows)
-    per_frame = np.mean([r[:n] for r in nees_rows], axis=0)
-    bounds = chi2_bounds(len(nees_rows), 3)
+    nees = np.asarray(nees)
+    bounds = chi2_bounds(1, 3)
     return Consistency(
-        len(nees_rows), n, float(per_frame.mean()), bounds, fraction_inside(per_frame, bounds),
+        len(runs), len(nees), float(nees.mean()), bounds, fraction_inside(nees, bounds),
         float(np.mean(nis)) if nis else math.nan, chi2_bounds(max(1, len(nis)), 2),
         float(np.mean(lm_nees)) if lm_nees else math.nan, chi2_bounds(max(1, len(lm_nees)), 1),
         float(np.mean(ates)))

@@ -22,9 +22,9 @@ HELP = "estimate σ_img, the boundary noise and the odometry noise from recordin
 DESCRIPTION = (
     "Estimate the noise models from SEQ (sequence folders with groundtruth.tum, e.g. from `stablemarks simulate`, "
     "or simulated scenarios by name or YAML file): the column noise of a line (noise.sigma_img), the noise of a "
-    "planar region's border (noise.boundary_px) and the odometry noise per metre and per radian (odometry.*). "
-    "Prints the filter's consistency with the current and with the estimated values and writes OUT (YAML, "
-    "for --config)."
+    "boundary's column (noise.boundary_px when a segment marks the edge, noise.free_boundary_px when not) and "
+    "the odometry noise per metre and per radian (odometry.*). Prints the filter's consistency with the current "
+    "and with the estimated values and writes OUT (YAML, for --config)."
 )
 
 
@@ -140,7 +140,8 @@ def _print(console, current, estimated, samples, before, after) -> None:
     from rich.table import Table
 
     t = Table(title=f"noise models from {samples.frames} frames: {len(samples.line_z)} lines on walls, "
-                    f"{len(samples.boundary_err2) // 2} boundaries, {len(samples.odometry)} odometry steps")
+                    f"{sum(len(v) for v in samples.boundary_err.values()) // 2} boundaries, "
+                    f"{len(samples.odometry)} odometry steps")
     for col in ("setting", "current", "estimated"):
         t.add_column(col, justify="left" if col == "setting" else "right")
 
@@ -149,11 +150,14 @@ def _print(console, current, estimated, samples, before, after) -> None:
 
     t.add_row("noise.sigma_img [px]", fmt(current.noise.sigma_img), fmt(estimated.noise.sigma_img))
     t.add_row("noise.boundary_px [px]", fmt(current.noise.boundary_px), fmt(estimated.noise.boundary_px))
+    t.add_row("noise.free_boundary_px [px]", fmt(current.noise.free_boundary_px),
+              fmt(estimated.noise.free_boundary_px))
     for key in ("trans_per_m", "rot_per_m_deg", "rot_per_rad", "trans_per_rad"):
         t.add_row(f"odometry.{key}", fmt(getattr(current.odometry, key)), fmt(getattr(estimated.odometry, key)))
     console.print(t)
-    c = Table(title=f"filter consistency over {before.runs} run(s), {before.frames} frames "
-                    "(95 % bounds; inside: fraction of frames)")
+    c = Table(title=f"filter consistency over {before.runs} run(s), {before.frames} frames (pose NEES: mean over "
+                    "all frames, inside: frames within one frame's 95 % bounds; NIS, landmark NEES: means and "
+                    "their 95 % bounds)")
     for col in ("", "pose NEES", "bounds", "inside", "NIS", "bounds", "landmark NEES", "bounds", "ATE [m]"):
         c.add_column(col, justify="right")
 

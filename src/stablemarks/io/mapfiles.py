@@ -18,11 +18,38 @@ linearly onto ``0…100`` (transparent pixels unknown); ``raw`` takes ``round(25
 (outside ``0…100``: unknown). Grids keep the image's orientation: ``grid[v, u]``, row ``v = 0`` is the
 TOP of the image, i.e. the largest ``y`` of the map when ``yaw = 0``.
 
-Wall extraction (:func:`walls_from_occupancy`, pixel steps in :class:`WallExtraction`): occupied cells →
-Zhang–Suen skeleton → probabilistic Hough segments → collinear pieces merged and refitted to the
+Wall extraction (:func:`walls_from_occupancy`, pixel steps in :class:`WallExtraction`), in two stages.
+
+*Which walls there are:* occupied cells → Guo–Hall skeleton → probabilistic Hough segments → collinear
+pieces merged (longest first; a gap filled with occupied cells is no doorway) and refitted to the
 skeleton → ends joined at corners and T-junctions → the other ends extended to the end of the occupied
-cells and called *free* when the cells just beyond them (along the wall, across its width) are free
-space → walls in map metres.
+cells and called *free* when the cells just beyond them (along the wall, across its width) are free space.
+
+*Where the camera sees them,* to a fraction of a cell: a stereo camera sees a wall's **face**, half the
+wall's thickness from its centre line (7.5 cm for a wall 3 cells of 5 cm thick), not its centre line.
+Each wall's faces are measured on the original grid: in every grid column the wall crosses, the boundary
+between its last occupied cell and the free (or unknown) cells beyond, on both sides; the wall's direction
+is the one most of these boundaries agree on (holes, specks and ragged cells left out), then two parallel
+lines are fitted to them by total least squares (the staircase of a slanted face averages out). A loose
+end lies where the occupied cells between the faces end (the outer boundary of the last occupied cell
+along the wall, to a fraction of a cell on a slanted wall); a joined end where the face meets the other
+wall's face (on the inside of a corner the other wall's near face, on the outside its far face).
+
+*One plane per visible side.* A side of a wall is *visible* when the cells beyond its face are free
+space (not unknown, not the grid's border) along at least 30 % of it. Each visible side becomes its own
+plane, on its face, with ``visible_from`` the side of ``p1 → p2`` the free space is on (``left`` or
+``right``): a room's outer wall with unknown space behind it gives one plane (its inner face), a
+free-standing partition gives two (one per face, each with the partition's free edges), and a face
+that a T-junction's stem meets is cut in two at the stem's faces. A wall seen from no free space is kept
+on its centre line as an occluder (``reference: false``, ``visible_from: both``). Every plane gets the
+height ``WallExtraction.height`` (``--height`` of ``stablemarks map-walls``).
+
+How close: on generated maps with walls 1–3 cells thick at any angle, ragged and with flipped cells
+(``tests/test_map_walls_accuracy.py``), free edges lie within 2 cm of where they were drawn along the
+wall wherever the cells fix them that well (on a slanted wall one cell thick, whose cells lie about a
+cell apart along it, within what the cells allow: up to ~3 cm), faces within a few millimetres, and
+walls of 1.5 m or more within 0.5° of their direction (a short slanted wall's cells fix its direction
+only to about half a cell over its length).
 
 GeoJSON (a ``FeatureCollection`` in local map metres ``(x, y)``, not WGS 84 longitude/latitude)::
 
@@ -41,14 +68,12 @@ first (``p1``) and last (``p2``) point of each line. Other geometry types are re
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 from numba import njit
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from ..errors import ConfigError, expected
 from ..maps import Map, ReferencePlane, _number, parse_map, parse_plane, read_yaml
@@ -213,6 +238,7 @@ class WallExtraction:
         to it at their intersection: a corner or a T-junction, never a free edge [cells].
     probe : how far beyond an end the cells must be free for a free edge [cells].
     min_corner_angle : smallest angle between two walls joined at a corner [rad].
+    height : ``(low, high)`` bottom and top of every wall [m] (the map's ``z``; finite, ``low < high``).
     """
 
     min_length: float = 0.3
@@ -222,9 +248,16 @@ class WallExtraction:
     join_tol: float = 3.0
     probe: float = 2.0
     min_corner_angle: float = float(np.deg2rad(20.0))
+    height: tuple[float, float] = (0.0, 2.5)
 
     def __post_init__(self) -> None:
         where = "WallExtraction"
+        z = self.height
+        if (not isinstance(z, tuple | list) or len(z) != 2
+                or not all(isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in z)
+                or not z[0] < z[1]):
+            raise ConfigError(expected("(low, high) finite heights [m] with low < high", z, where=f"{where}.height"))
+        object.__setattr__(self, "height", (float(z[0]), float(z[1])))
         for name, unit in (("min_length", "m"), ("offset_tol", "cells"), ("join_tol", "cells"),
                            ("probe", "cells")):
             if not getattr(self, name) > 0:
@@ -237,8 +270,10 @@ class WallExtraction:
 
 
 @njit(cache=True)
-def _zhang_suen(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """Zhang–Suen thinning of a 0/1 uint8 image (H, W) whose border rows and columns are 0."""
+def _guo_hall(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Guo–Hall thinning of a 0/1 uint8 image (H, W) whose border rows and columns are 0.
+
+    (Zhang–Suen thinning, used before, deletes diagonal walls two to three cells thick entirely.)"""
     out = img.copy()
     H, W = out.shape
     marks = np.zeros_like(out)
@@ -251,23 +286,21 @@ def _zhang_suen(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
                 for x in range(1, W - 1):
                     if out[y, x] == 0:
                         continue
-                    p = (out[y - 1, x], out[y - 1, x + 1], out[y, x + 1], out[y + 1, x + 1],
-                         out[y + 1, x], out[y + 1, x - 1], out[y, x - 1], out[y - 1, x - 1])
-                    b = 0
-                    a = 0
-                    for k in range(8):
-                        b += p[k]
-                        if p[k] == 0 and p[(k + 1) % 8] == 1:
-                            a += 1
-                    if b < 2 or b > 6 or a != 1:
-                        continue
-                    # p[0] = N, p[2] = E, p[4] = S, p[6] = W
-                    if step == 0 and (p[0] * p[2] * p[4] != 0 or p[2] * p[4] * p[6] != 0):
-                        continue
-                    if step == 1 and (p[0] * p[2] * p[6] != 0 or p[0] * p[4] * p[6] != 0):
-                        continue
-                    marks[y, x] = 1
-                    n += 1
+                    p2, p3, p4 = out[y - 1, x] > 0, out[y - 1, x + 1] > 0, out[y, x + 1] > 0  # N, NE, E
+                    p5, p6, p7 = out[y + 1, x + 1] > 0, out[y + 1, x] > 0, out[y + 1, x - 1] > 0  # SE, S, SW
+                    p8, p9 = out[y, x - 1] > 0, out[y - 1, x - 1] > 0  # W, NW
+                    c = (int(not p2 and (p3 or p4)) + int(not p4 and (p5 or p6))
+                         + int(not p6 and (p7 or p8)) + int(not p8 and (p9 or p2)))
+                    n1 = int(p9 or p2) + int(p3 or p4) + int(p5 or p6) + int(p7 or p8)
+                    n2 = int(p2 or p3) + int(p4 or p5) + int(p6 or p7) + int(p8 or p9)
+                    nn = min(n1, n2)
+                    if step == 0:
+                        m = (p6 or p7 or not p9) and p8
+                    else:
+                        m = (p2 or p3 or not p5) and p4
+                    if c == 1 and 2 <= nn <= 3 and not m:
+                        marks[y, x] = 1
+                        n += 1
             if n > 0:
                 changed = True
                 for y in range(1, H - 1):
@@ -279,9 +312,9 @@ def _zhang_suen(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
 
 
 def skeleton(mask: np.ndarray) -> np.ndarray:
-    """One-cell-wide skeleton (H, W) bool of a boolean mask (H, W) (Zhang–Suen thinning)."""
+    """One-cell-wide skeleton (H, W) bool of a boolean mask (H, W) (Guo–Hall thinning)."""
     padded = np.pad(np.asarray(mask, dtype=np.uint8), 1)
-    return _zhang_suen(padded)[1:-1, 1:-1].astype(bool)
+    return _guo_hall(padded)[1:-1, 1:-1].astype(bool)
 
 
 @dataclass
@@ -294,6 +327,7 @@ class _Line:
     s1: float
     samples: np.ndarray  # (N, 2) points supporting the fit
     joined: list
+    partner: list = field(default_factory=lambda: [-1, -1])  # the wall each joined end was joined to
 
     @property
     def n(self) -> np.ndarray:
@@ -331,47 +365,59 @@ def _arrays(lines: list[_Line]) -> tuple[np.ndarray, ...]:
     return C, T, N, np.array([line.s0 for line in lines]), np.array([line.s1 for line in lines])
 
 
-def _merge(lines: list[_Line], p: WallExtraction, max_gap_px: float) -> list[_Line]:
+def _mergeable(a: _Line, others: list[_Line], p: WallExtraction, max_gap_px: float,
+               mask: np.ndarray | None = None) -> np.ndarray:
+    """Which of ``others`` can be merged into ``a`` (docstring of :func:`_merge`)."""
+    C, T, N, S0, S1 = _arrays(others)
+    E = np.stack([C + S0[:, None] * T, C + S1[:, None] * T], axis=1)  # (m, 2 ends, 2)
+    L = S1 - S0
+    a_long = a.length >= L
+    lc = np.where(a_long[:, None], a.c[None], C)
+    lt = np.where(a_long[:, None], a.t[None], T)
+    ln = np.where(a_long[:, None], a.n[None], N)
+    ls0, ls1 = np.where(a_long, a.s0, S0), np.where(a_long, a.s1, S1)
+    ends = np.where(a_long[:, None, None], E, np.array([a.end(0), a.end(1)])[None])  # the shorter's ends
+    d = ends - lc[:, None, :]
+    off = np.abs(np.einsum("mkd,md->mk", d, ln)).max(axis=1)
+    s = np.einsum("mkd,md->mk", d, lt)
+    gap = np.maximum(s.min(axis=1) - ls1, ls0 - s.max(axis=1))
+    # a short piece's direction is known only to about atan(2 offset_tol / length)
+    short = np.minimum(a.length, L)
+    cos_tol = np.cos(np.maximum(p.angle_tol, np.arctan2(2.0 * p.offset_tol, short)))
+    ok = (np.abs(T @ a.t) >= cos_tol) & (off <= p.offset_tol)
+    bridged = np.zeros(len(others), bool)
+    if mask is not None:  # a wider gap filled with occupied cells is no doorway: the wall goes on
+        for m in np.flatnonzero(ok & (gap > max_gap_px)):
+            q = others[m]
+            pa, pb = min(((a.end(i), q.end(j)) for i in (0, 1) for j in (0, 1)),
+                         key=lambda e: float(np.linalg.norm(e[0] - e[1])))
+            bridged[m] = bool(_cell(mask, _samples(pa, pb), False).all())
+    return ok & ((gap <= max_gap_px) | bridged)
+
+
+def _merge(lines: list[_Line], p: WallExtraction, max_gap_px: float, mask: np.ndarray | None = None) -> list[_Line]:
     """Merge collinear pieces until no pair is mergeable; each merged wall refitted to all its samples.
 
     Two pieces are mergeable when their directions differ by less than ``angle_tol`` (or than the
     shorter piece can resolve, ``atan(2 offset_tol / length)``), the shorter's end points lie within
     ``offset_tol`` of the longer's line, and the gap between them along that line is at most
-    ``max_gap_px``; mergeable pieces are grouped transitively (connected components).
+    ``max_gap_px`` or filled with occupied cells of ``mask`` (a thick slanted wall's skeleton may break
+    where a doorway could not be). Longest first, each wall takes every piece mergeable with it and is refitted, until
+    it takes no more: a short piece at a corner, mergeable with both walls, goes to one of them and
+    never chains the two walls into one.
     """
-    while len(lines) > 1:
-        C, T, N, S0, S1 = _arrays(lines)
-        E = np.stack([C + S0[:, None] * T, C + S1[:, None] * T], axis=1)  # (n, 2 ends, 2)
-        L = S1 - S0
-        rows, cols = [], []
-        for i in range(len(lines) - 1):
-            j = np.arange(i + 1, len(lines))
-            i_long = L[i] >= L[j]
-            lc, lt, ln = (np.where(i_long[:, None], X[i], X[j]) for X in (C, T, N))
-            ls0, ls1 = np.where(i_long, S0[i], S0[j]), np.where(i_long, S1[i], S1[j])
-            ends = np.where(i_long[:, None, None], E[j], E[i][None])  # the shorter's ends (m, 2, 2)
-            d = ends - lc[:, None, :]
-            off = np.abs(np.einsum("mkd,md->mk", d, ln)).max(axis=1)
-            s = np.einsum("mkd,md->mk", d, lt)
-            gap = np.maximum(s.min(axis=1) - ls1, ls0 - s.max(axis=1))
-            # a short piece's direction is known only to about atan(2 offset_tol / length)
-            short = np.minimum(L[i], L[j])
-            cos_tol = np.cos(np.maximum(p.angle_tol, np.arctan2(2.0 * p.offset_tol, short)))
-            ok = (np.abs(T[j] @ T[i]) >= cos_tol) & (off <= p.offset_tol) & (gap <= max_gap_px)
-            rows += [i] * int(ok.sum())
-            cols += j[ok].tolist()
-        if not rows:
-            break
-        graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(lines), len(lines)))
-        n_groups, label = connected_components(graph, directed=False)
-        merged = []
-        for g in range(n_groups):
-            members = np.flatnonzero(label == g)
-            if len(members) == 1:
-                merged.append(lines[members[0]])
-            else:
-                merged.append(_fit(np.vstack([lines[m].samples for m in members]), E[members].reshape(-1, 2)))
-        lines = merged
+    lines = sorted(lines, key=lambda line: -line.length)
+    i = 0
+    while i < len(lines) - 1:
+        rest = lines[i + 1:]
+        ok = _mergeable(lines[i], rest, p, max_gap_px, mask)
+        if not ok.any():
+            i += 1
+            continue
+        group = [lines[i]] + [q for q, m in zip(rest, ok, strict=True) if m]
+        ends = np.array([q.end(k) for q in group for k in (0, 1)])
+        lines[i] = _fit(np.vstack([q.samples for q in group]), ends)
+        lines[i + 1:] = [q for q, m in zip(rest, ok, strict=True) if not m]
     return lines
 
 
@@ -427,7 +473,8 @@ def _cell(mask_or_grid: np.ndarray, pts: np.ndarray, outside) -> np.ndarray:
 
 
 def _join(lines: list[_Line], half: np.ndarray, p: WallExtraction) -> None:
-    """Move ends near another wall's line to the intersection of the lines (corners, T-junctions)."""
+    """Move ends near another wall's line to the intersection of the lines (corners, T-junctions); each
+    joined end remembers the wall it was joined to (``partner``)."""
     if len(lines) < 2:
         return
     C, T, N, S0, S1 = _arrays(lines)
@@ -448,13 +495,15 @@ def _join(lines: list[_Line], half: np.ndarray, p: WallExtraction) -> None:
             dist = np.linalg.norm(X - a.end(k), axis=1)
             near = ok & (dist <= reach)
             if near.any():
-                moves.append((i, k, float(s[np.flatnonzero(near)[np.argmin(dist[near])]])))
-    for i, k, s in moves:
+                j = int(np.flatnonzero(near)[np.argmin(dist[near])])
+                moves.append((i, k, float(s[j]), j))
+    for i, k, s, j in moves:
         if k == 0:
             lines[i].s0 = s
         else:
             lines[i].s1 = s
         lines[i].joined[k] = True
+        lines[i].partner[k] = j
 
 
 def _free_end(line: _Line, k: int, half: float, occupied: np.ndarray, grid: np.ndarray,
@@ -479,9 +528,295 @@ def _free_end(line: _Line, k: int, half: float, occupied: np.ndarray, grid: np.n
     return bool(np.all((values >= 0) & (values < OCCUPIED)))
 
 
+# ------------------------------------------------------------ sub-cell faces and ends
+
+
+@dataclass
+class _Faces:
+    """A wall measured to sub-cell accuracy, in pixel coordinates: the centre point ``c`` and direction ``t``
+    (normal ``n``), the faces' offsets from ``c`` along ``n`` (``f[+1] > 0`` on the ``+n`` side, ``f[-1] < 0``),
+    which sides border free space (``visible``) and the ends' positions along ``t`` from ``c`` (``ends``: the
+    end of the occupied cells, for ends not joined to another wall)."""
+
+    c: np.ndarray
+    t: np.ndarray
+    f: dict
+    visible: dict
+    ends: list
+
+    @property
+    def n(self) -> np.ndarray:
+        return np.array([-self.t[1], self.t[0]])
+
+    def face_point(self, side: int, s: float) -> np.ndarray:
+        return self.c + s * self.t + self.f[side] * self.n
+
+
+def _face_samples(line: _Line, half: float, occupied: np.ndarray, grid: np.ndarray, margins, p: WallExtraction
+                  ) -> dict:
+    """Where the occupied cells end on either side of the wall, column by column of the grid.
+
+    For the side ``+1`` (toward ``line.n``) or ``−1``, the grid axis nearest that normal is walked from the
+    wall's line outward in every grid column the wall crosses between ``margins`` [cells] from its ends;
+    the face lies on the boundary between the last occupied cell and the first of at least two
+    non-occupied ones (a shorter run is a hole). On a slanted face these boundaries form a staircase
+    within half a cell (along the axis) of the face's line, centred on it.
+
+    Returns per side ``(points (M, 2), free (M,))``: the face points in pixel coordinates (NaN where the
+    walk finds no face within the wall's width: a hole through it, or another wall attached there) and
+    whether the cells just beyond are free space (no unknown cell within ``probe``)."""
+    lo, hi = line.s0 + margins[0], line.s1 - margins[1]
+    if hi - lo < 2.0:  # a short wall: its middle part
+        mid = 0.5 * (line.s0 + line.s1)
+        lo, hi = mid - 0.25 * line.length, mid + 0.25 * line.length
+    out = {}
+    for side in (1, -1):
+        normal = side * line.n
+        a = int(np.argmax(np.abs(normal)))  # walk along grid axis a (0: u, 1: v) ...
+        b = 1 - a  # ... in the columns of axis b
+        step = 1 if normal[a] > 0 else -1
+        ends = np.sort([(line.c + lo * line.t)[b], (line.c + hi * line.t)[b]])
+        cols = np.arange(np.ceil(ends[0]), np.floor(ends[1]) + 1)
+        if len(cols) == 0:
+            out[side] = (np.zeros((0, 2)), np.zeros(0, bool))
+            continue
+        start = line.c[a] + (cols - line.c[b]) / line.t[b] * line.t[a]  # the line's crossing of each column
+        reach = int(np.ceil((half + 2.5) / abs(normal[a]))) + 2
+        k = np.arange(-1, reach + 1)
+        cells_a = np.rint(start)[:, None] + step * k[None, :]  # (M, K) along axis a
+        uv = np.empty(cells_a.shape + (2,))
+        uv[..., a], uv[..., b] = cells_a, cols[:, None]
+        occ = _cell(occupied, uv.reshape(-1, 2), False).reshape(cells_a.shape)
+        clear = ~occ[:, 1:-1] & ~occ[:, 2:]  # cells i and i + 1 not occupied (i from 0)
+        before = np.cumsum(occ, axis=1)[:, :-2] > 0  # some occupied cell up to i - 1
+        exits = clear & before & occ[:, :-2]  # ... and i - 1 occupied
+        i = np.argmax(exits, axis=1)
+        ok = exits[np.arange(len(cols)), i]
+        edge_a = cells_a[np.arange(len(cols)), i + 1] - 0.5 * step  # boundary before cell i
+        pts = np.empty((len(cols), 2))
+        pts[:, a], pts[:, b] = edge_a, cols
+        dist = (pts - line.c) @ normal
+        ok &= dist <= half + 2.0  # further out: another wall attached
+        pts[~ok] = np.nan
+        beyond = edge_a[:, None] + step * (0.5 + np.arange(int(np.ceil(p.probe))))[None, :]
+        q = np.empty(beyond.shape + (2,))
+        q[..., a], q[..., b] = beyond, cols[:, None]
+        values = _cell(grid, q.reshape(-1, 2), UNKNOWN).reshape(beyond.shape)
+        out[side] = (pts, ok & (values >= 0).all(axis=1))
+    return out
+
+
+def _parallel_fit(P: np.ndarray, side_of: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Total least squares of parallel lines, one per side: the direction ``t`` (``t · t0 ≥ 0``) and each
+    side's offset ``n · p`` (``n`` = ``t`` turned left)."""
+    groups = [g for g in (1, -1) if (side_of == g).sum() >= 2]
+    t = t0
+    if groups and sum((side_of == g).sum() for g in groups) >= 3:
+        centred = np.vstack([P[side_of == g] - P[side_of == g].mean(axis=0) for g in groups])
+        t = np.linalg.svd(centred, full_matrices=False)[2][0]
+        t = t if t @ t0 >= 0 else -t
+    n = np.array([-t[1], t[0]])
+    return t, {g: float(np.mean(P[side_of == g] @ n)) for g in (1, -1) if (side_of == g).any()}
+
+
+def _consensus_direction(P: np.ndarray, side_of: np.ndarray, t0: np.ndarray, spread: float = 6.0,
+                         step: float = 0.05) -> np.ndarray:
+    """The direction within ``spread`` degrees of ``t0`` along which most transitions line up: per side,
+    the squared distance from the side's median line, capped at 0.6 cells, summed and least (a few
+    flipped cells cannot tilt it as they tilt a least-squares line)."""
+    a = np.deg2rad(np.arange(-spread, spread + step / 2, step))
+    base = np.arctan2(t0[1], t0[0])
+    N = np.stack([-np.sin(base + a), np.cos(base + a)], axis=1)  # (A, 2)
+    proj = N @ P.T  # (A, M)
+    loss = np.zeros(len(a))
+    for g in (1, -1):
+        sel = side_of == g
+        if sel.sum() < 2:
+            continue
+        res = proj[:, sel] - np.median(proj[:, sel], axis=1, keepdims=True)
+        loss += np.minimum(res**2, 0.36).sum(axis=1)
+    best = base + a[int(np.argmin(loss))]
+    return np.array([np.cos(best), np.sin(best)])
+
+
+def _fit_faces(line: _Line, half: float, scans: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The wall's direction and its faces' offsets: from the direction most face points agree on
+    (:func:`_consensus_direction`), two parallel lines fitted by total least squares to the face points
+    of both sides within 0.75 cells of each side's median line: holes, specks and ragged cells drop out,
+    the staircase of a slanted face (within half a cell of its line) stays and averages out. Returns the
+    point ``c``, the direction ``t`` and the offsets ``{+1: f+, -1: f−}`` of the faces from ``c`` along
+    ``n``."""
+    pts, side_of = [], []
+    for side, (face, _) in scans.items():
+        ok = np.isfinite(face[:, 0])
+        pts.append(face[ok])
+        side_of.append(np.full(int(ok.sum()), side))
+    P, side_of = np.vstack(pts), np.concatenate(side_of)
+    c, t, f = line.c, line.t, {}
+    if len(P):
+        t = _consensus_direction(P, side_of, line.t)
+        keep = np.ones(len(P), bool)
+        for _ in range(2):  # transitions within 0.75 cells of each side's median line, then refitted
+            n = np.array([-t[1], t[0]])
+            proj = P @ n
+            new = np.zeros(len(P), bool)
+            for g in (1, -1):
+                sel = side_of == g
+                if sel.any():
+                    centre = np.median(proj[sel & keep] if (sel & keep).any() else proj[sel])
+                    new[sel] = np.abs(proj[sel] - centre) <= 0.75
+            if not new.any():
+                break
+            keep = new
+            t, _ = _parallel_fit(P[keep], side_of[keep], t)
+        t, d = _parallel_fit(P[keep], side_of[keep], t)
+        n = np.array([-t[1], t[0]])
+        f = {g: dg - float(c @ n) for g, dg in d.items()}
+    for side in (1, -1):  # a side without transitions: the distance transform's width
+        if side not in f:
+            f[side] = f[-side] + side * 2.0 * half if -side in f else side * half
+    if f[1] <= f[-1]:
+        f = {1: half, -1: -half}
+    return c, t, f
+
+
+def _end_of_cells(occupied: np.ndarray, c, t, f: dict, s_coarse: float, outward: float) -> float:
+    """Sub-cell position along ``t`` (from ``c``) where the wall's occupied cells end going ``outward`` (±1).
+
+    The cells whose centres lie between the wall's faces (``f``; free cells within 0.05 cells of a face
+    are left out: they may lie just outside the wall) near the coarse end are split into those before
+    the end and those beyond it, with the fewest misplaced cells (an occupied one beyond, a free one before: holes and
+    specks); the end lies halfway between the last cell before and the first beyond, on the outer
+    boundary of the last occupied cell along the wall (to a fraction of a cell on a slanted wall)."""
+    n = np.array([-t[1], t[0]])
+    centre, half = 0.5 * (f[1] + f[-1]), 0.5 * (f[1] - f[-1])
+    H, W = occupied.shape
+    span = 5.0 + half
+    corners = np.array([c + (s_coarse + a) * t + b * n for a in (-span, span)
+                        for b in (centre - half - 1.0, centre + half + 1.0)])
+    u0, v0 = np.floor(corners.min(axis=0)).astype(int) - 1
+    u1, v1 = np.ceil(corners.max(axis=0)).astype(int) + 1
+    vv, uu = np.mgrid[max(v0, 0):min(v1, H - 1) + 1, max(u0, 0):min(u1, W - 1) + 1]
+    vv, uu = vv.ravel(), uu.ravel()
+    cells = np.column_stack([uu, vv]).astype(float)
+    along = outward * ((cells - c) @ t - s_coarse)
+    across = np.abs((cells - c) @ n - centre)
+    occ_all = occupied[vv, uu]
+    # an occupied cell is inside the wall wherever it is; a free one only tells where the wall is not when
+    # it is clearly inside the wall's width (a free cell on the line of a face may lie just outside it)
+    sel = (across <= np.where(occ_all, half + 0.25, half - 0.05)) & (along >= -span + 1.0) & (along <= span)
+    if not sel.any():
+        return s_coarse
+    u, occ = along[sel], occ_all[sel]
+    order = np.argsort(u, kind="stable")
+    u, occ = u[order], occ[order]
+    # a split after the k-th cell: free cells up to k and occupied cells after k are misplaced
+    loss = np.concatenate([[0], np.cumsum(~occ)]) + np.concatenate([np.cumsum(occ[::-1])[::-1], [0]])
+    valid = np.concatenate([[False], u[1:] > u[:-1] + 1e-6, [True]])  # between distinct positions only
+    best = np.flatnonzero(valid & (loss == loss[valid].min()))
+    k = int(best[np.argmin(np.abs(u[best - 1]))])  # the best split nearest the coarse end
+    last = u[k - 1]
+    step = 1.0 / max(abs(t[0]), abs(t[1]))  # the next cell along the wall, beyond the grid's border
+    nxt = u[k] if k < len(u) else last + step
+    return s_coarse + outward * 0.5 * (last + min(nxt, last + step))
+
+
+def _measure(line: _Line, half: float, lines: list[_Line], halves: np.ndarray, occupied: np.ndarray,
+             grid: np.ndarray, p: WallExtraction) -> _Faces:
+    """A wall's faces, direction and loose ends to sub-cell accuracy (module docstring)."""
+    margins = []
+    for k in (0, 1):  # leave out the cap of a loose end and, at a junction, the other wall's ragged face
+        j = line.partner[k]
+        if j < 0:
+            margins.append(0.5)
+            continue
+        sin = max(abs(float(lines[j].n @ line.t)), 0.3)
+        margins.append(halves[j] / sin + 1.0)
+    scans = _face_samples(line, half, occupied, grid, margins, p)
+    c, t, f = _fit_faces(line, half, scans)
+    visible = {side: bool(free.sum() >= max(2, 0.3 * len(free))) for side, (_, free) in scans.items()}
+    ends = []
+    for k in (0, 1):
+        s_coarse = float((line.end(k) - c) @ t)
+        ends.append(None if line.joined[k] else _end_of_cells(occupied, c, t, f, s_coarse, -1.0 if k == 0 else 1.0))
+    return _Faces(c, t, f, visible, ends)
+
+
+def _cross_at(a: _Faces, side: int, b: _Faces, b_side: int) -> float | None:
+    """Position along ``a`` (from ``a.c``) where ``a``'s face ``side`` meets ``b``'s face ``b_side``."""
+    nb = b.n
+    den = float(nb @ a.t)
+    if abs(den) < 1e-6:
+        return None
+    return float((nb @ b.c + b.f[b_side] - nb @ a.c - a.f[side] * (nb @ a.n)) / den)
+
+
+def _junction_face(i: int, k: int, side: int, lines: list[_Line], geo: list[_Faces]) -> float:
+    """Where face ``side`` of wall ``i`` ends at its end ``k``, joined to wall ``j = lines[i].partner[k]``:
+    on ``j``'s face toward wall ``i``'s body when the face is on the inside of the corner or ``j`` runs on
+    through the junction (a T), else on ``j``'s far face (the outside of an L corner). Positions along
+    ``geo[i].t`` from ``geo[i].c``; the junction of the centre lines when the faces do not meet near it."""
+    g, line, j = geo[i], lines[i], lines[i].partner[k]
+    other = geo[j]
+    end = float((line.end(k) - g.c) @ g.t)
+    into_i = g.t if k == 0 else -g.t  # from the junction into this wall's body
+    sj = float((g.c + end * g.t - other.c) @ other.t)
+    m = int(np.argmin([abs(sj - float((lines[j].end(q) - other.c) @ other.t)) for q in (0, 1)]))
+    toward = 1 if other.n @ into_i > 0 else -1  # j's face toward this wall's body
+    b_side = toward
+    if lines[j].joined[m] and lines[j].partner[m] == i:  # an L corner: both walls end here
+        into_j = other.t if m == 0 else -other.t
+        if side * g.n @ into_j < 0:  # the outside of the corner
+            b_side = -toward
+    x = _cross_at(g, side, other, b_side)
+    width = (other.f[1] - other.f[-1]) + (g.f[1] - g.f[-1])
+    return end if x is None or abs(x - end) > 2.0 * width + 3.0 else x
+
+
+def _face_pieces(i: int, lines: list[_Line], geo: list[_Faces], free: list, min_px: float) -> list:
+    """The visible faces of wall ``i`` as pieces ``(side, s_a, s_b, free_a, free_b)`` along ``geo[i].t``
+    (from ``geo[i].c``) of at least ``min_px``.
+
+    A face ends at a loose end where the occupied cells end (free or not), at a joined end where it meets
+    the other wall's face (:func:`_junction_face`); a face that the stem of a T-junction meets (a wall at
+    least ``min_px`` long whose end is joined to this one, on this face's side) is cut between the stem's
+    faces."""
+    g, line = geo[i], lines[i]
+    pieces = []
+    for side in (1, -1):
+        if not g.visible[side]:
+            continue
+        lim = [g.ends[k] if line.partner[k] < 0 else _junction_face(i, k, side, lines, geo) for k in (0, 1)]
+        a, b = lim
+        if b - a < min_px:
+            continue
+        cuts = []
+        for j, stem in enumerate(lines):
+            for m in (0, 1):
+                if j == i or stem.partner[m] != i or j in line.partner or stem.length < min_px:
+                    continue  # not a stem of this wall (a corner is handled at the ends)
+                into_j = geo[j].t if m == 0 else -geo[j].t
+                if side * g.n @ into_j <= 0:
+                    continue  # on the other face
+                xs = [_cross_at(g, side, geo[j], q) for q in (1, -1)]
+                if None not in xs:
+                    cuts.append((max(min(xs), a), min(max(xs), b)))
+        edges = [(a, True)]
+        for lo, hi in sorted(c for c in cuts if c[1] > c[0]):
+            if lo <= edges[-1][0]:  # overlapping cuts
+                edges[-1] = (max(edges[-1][0], hi), False)
+                continue
+            edges += [(lo, False), (hi, False)]
+        edges.append((b, True))
+        for (sa, ea), (sb, eb) in zip(edges[::2], edges[1::2], strict=True):
+            if sb - sa >= min_px:
+                pieces.append((side, sa, sb, ea and free[i][0], eb and free[i][1]))
+    return pieces
+
+
 def walls_from_occupancy(grid, resolution: float, origin, params: WallExtraction = WallExtraction(),
                          *, source: str = "") -> Map:
-    """Walls of an occupancy grid as a :class:`Map` in map metres.
+    """Walls of an occupancy grid as a :class:`Map` of the faces a camera sees, in map metres.
 
     Parameters
     ----------
@@ -489,11 +824,13 @@ def walls_from_occupancy(grid, resolution: float, origin, params: WallExtraction
         occupied, negative is unknown, the rest is free space.
     resolution : cell size [m].
     origin : (3,) pose ``(x [m], y [m], yaw [rad])`` of the grid's lower-left corner in the map.
-    params : the extraction's tolerances.
+    params : the extraction's tolerances and the walls' height.
 
-    Returns a map of walls ``wall01, wall02, …`` (longest first), end points rounded to 1 mm, ``p1`` the
-    end with the smaller ``x`` (then ``y``), ``free_edges`` the ends that stand free (module docstring),
-    ``z`` the default height.
+    Returns a map of planes ``wall01, wall02, …`` (longest first), one per face that borders free space
+    (module docstring), end points rounded to 1 mm, ``p1`` the end with the smaller ``x`` (then ``y``),
+    ``visible_from`` the side of ``p1 → p2`` the free space is on, ``free_edges`` the ends that stand
+    free, ``z`` = ``params.height``. A wall seen from no free space is kept as an occluder
+    (``reference: false``) on its centre line.
     """
     grid = np.asarray(grid)
     if grid.ndim != 2 or grid.size == 0:
@@ -511,8 +848,8 @@ def walls_from_occupancy(grid, resolution: float, origin, params: WallExtraction
         _fit(_samples(s[:2], s[2:]), s.reshape(2, 2)) for s in found.reshape(-1, 4).astype(float)
     ]
     max_gap_px = params.max_gap / resolution
-    lines = [_refit_to_skeleton(line, skel, params.offset_tol) for line in _merge(pieces, params, max_gap_px)]
-    while len(merged := _merge(lines, params, max_gap_px)) < len(lines):  # refits can grow walls into each other
+    lines = [_refit_to_skeleton(line, skel, params.offset_tol) for line in _merge(pieces, params, max_gap_px, mask)]
+    while len(merged := _merge(lines, params, max_gap_px, mask)) < len(lines):  # refits can grow walls into each other
         lines = [_refit_to_skeleton(line, skel, params.offset_tol) for line in merged]
     half = np.array([float(np.median(_cell(half_map, _samples(line.end(0), line.end(1)), 0.0))) for line in lines])
     keep = [i for i, line in enumerate(lines) if line.length + 2 * half[i] + 2 >= min_px]
@@ -520,20 +857,47 @@ def walls_from_occupancy(grid, resolution: float, origin, params: WallExtraction
     _join(lines, half, params)
     free = [[not line.joined[k] and _free_end(line, k, half[i], mask, grid, params) for k in (0, 1)]
             for i, line in enumerate(lines)]
-    walls = []
-    for line, is_free in zip(lines, free, strict=True):
-        if line.length < min_px:
+    geo = [_measure(line, half[i], lines, half, occupied, grid, params) for i, line in enumerate(lines)]
+
+    H = grid.shape[0]
+    found_planes = []  # (length [m], P (2, 2) [m], free (2,), visible_from, reference)
+    for i, line in enumerate(lines):
+        g = geo[i]
+        pieces = _face_pieces(i, lines, geo, free, min_px)
+        if not pieces and not any(g.visible.values()):  # seen from nowhere: an occluder on its centre line
+            ends = [g.ends[k] if g.ends[k] is not None else float((line.end(k) - g.c) @ g.t) for k in (0, 1)]
+            if ends[1] - ends[0] < min_px:
+                continue
+            mid = 0.5 * (g.f[1] + g.f[-1])
+            ends_px = np.array([g.c + e * g.t + mid * g.n for e in ends])
+            P = cell_to_map(ends_px, H, resolution, origin)
+            found_planes.append((P, (False, False), "both", False, ends_px.mean(axis=0)))
             continue
-        P = np.round(cell_to_map(np.array([line.end(0), line.end(1)]), grid.shape[0], resolution, origin), 3)
+        for side, sa, sb, fa, fb in pieces:
+            ends_px = np.array([g.face_point(side, sa), g.face_point(side, sb)])
+            P = cell_to_map(ends_px, H, resolution, origin)
+            toward = cell_to_map(0.5 * (ends_px[0] + ends_px[1]) + side * g.n, H, resolution, origin)
+            d = P[1] - P[0]
+            left = d[0] * (toward[1] - P[0, 1]) - d[1] * (toward[0] - P[0, 0]) > 0
+            found_planes.append((P, (fa, fb), "left" if left else "right", True, ends_px.mean(axis=0)))
+    walls = []
+    for P, is_free, side, reference, mid_px in found_planes:
+        P = np.round(P, 3)
         d = P[1] - P[0]
         if d[0] < -1e-9 or (abs(d[0]) <= 1e-9 and d[1] < 0):
             P, is_free = P[::-1], is_free[::-1]
-        walls.append((float(np.linalg.norm(d)), P, tuple(e for e, f in zip(("p1", "p2"), is_free, strict=True) if f)))
-    walls.sort(key=lambda w: -w[0])
+            side = {"left": "right", "right": "left", "both": "both"}[side]
+        walls.append((float(np.linalg.norm(P[1] - P[0])), P,
+                      tuple(e for e, f in zip(("p1", "p2"), is_free, strict=True) if f), side, reference,
+                      (round(float(mid_px[1]), 1), round(float(mid_px[0]), 1))))
+    # longest first; equal lengths (the faces of one wall) in the grid's row and column order, so that the
+    # ids do not depend on the map's origin
+    walls.sort(key=lambda w: (-round(w[0], 2), w[5]))
     planes = tuple(
         ReferencePlane(f"wall{i + 1:02d}", (float(P[0, 0]), float(P[0, 1])), (float(P[1, 0]), float(P[1, 1])),
-                       name=f"wall{i + 1:02d}", free_edges=edges)
-        for i, (_, P, edges) in enumerate(walls)
+                       name=f"wall{i + 1:02d}", free_edges=edges, z=params.height, visible_from=side,
+                       reference=reference)
+        for i, (_, P, edges, side, reference, _) in enumerate(walls)
     )
     return Map(planes, "map", source)
 

@@ -24,12 +24,17 @@ def _panels(plt, n: int, width: float = 5.0, height: float = 3.8):
     return fig, axes[0]
 
 
-def nees_figure(path: str | Path, summary: dict) -> Path:
-    """Per scenario: the N-trial average pose NEES of each method over the frames (log scale) with the
-    95 % bounds of an N-trial average of a 3-dof χ² value."""
-    plt = _pyplot()
-    fig, axes = _panels(plt, len(summary))
-    for ax, (scen, by_method) in zip(axes, summary.items(), strict=True):
+def make_nees_figure(summary: dict):
+    """The figure of :func:`nees_figure` (a matplotlib ``Figure``, not yet saved)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
+
+    n_panels = max(len(summary), 1)
+    fig = Figure(figsize=(5.0 * n_panels, 3.8))
+    FigureCanvasAgg(fig)
+    axes = [fig.add_subplot(1, n_panels, k + 1) for k in range(n_panels)]
+    for ax, (scen, by_method) in zip(axes, summary.items(), strict=False):
         for method, s in by_method.items():
             v = np.maximum(np.asarray(s["nees_pose_time"], dtype=float), 1e-3)
             ax.semilogy(np.arange(len(v)), v, color=COLORS.get(method), lw=1.4, label=method)
@@ -38,10 +43,16 @@ def nees_figure(path: str | Path, summary: dict) -> Path:
         ax.axhline(3.0, color="0.5", lw=0.8, ls=":")
         n = next(iter(by_method.values()))["trials"]
         ax.set(title=f"{scen}: pose NEES, average of {n} trials", xlabel="frame", ylabel="NEES (3 dof)")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # frames are whole numbers
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def nees_figure(path: str | Path, summary: dict) -> Path:
+    """Per scenario: the N-trial average pose NEES of each method over the frames (log scale, frames on
+    integer ticks) with the 95 % bounds of an N-trial average of a 3-dof χ² value."""
+    make_nees_figure(summary).savefig(str(path), dpi=110)
     return Path(path)
 
 

@@ -12,8 +12,8 @@ estimates, frame by frame at the *true* pose:
 ``noise.boundary_px``, ``noise.free_boundary_px``
     the σ of a boundary's column [px], when a segment marks the edge (snapped, Sec 3.2) and when the planar
     region's border itself does: each boundary found is compared with the column where the true pose projects
-    the map's free edge, in both images; what its mean squared error (gross outliers clipped) holds beyond the
-    modelled row spread and line noise is the border's own variance (floored at 0).
+    the map's free edge, in both images; the border's σ is what, added to each boundary's own modelled row
+    spread and line noise, gives its errors unit mean square (:func:`missing_sigma`).
 ``odometry``
     the random-walk noise of wheel odometry: each increment's error against the true increment, split into
     Thrun's ``rot1, trans, rot2`` (:func:`stablemarks.motion.decompose`), regressed (non-negative least
@@ -154,6 +154,27 @@ def clipped_rms(z, k: float = 4.0, iterations: int = 10) -> float:
     return rms
 
 
+def missing_sigma(err, model_var, k: float = 4.0) -> float:
+    """The σ ``b`` to add to each sample's modelled variance so that the normalised errors have unit mean
+    square: ``mean(err² / (model_var + b²)) = 1`` (0 when they already have less), gross outliers (beyond ``k``
+    normalised) left out. Each boundary keeps its own modelled spread; ``b`` is what none of them accounts for
+    (block matching's shift of a depth edge, a bias shared by all rows)."""
+    err, model_var = np.asarray(err, dtype=float), np.asarray(model_var, dtype=float)
+
+    def msq(b):
+        z2 = err**2 / (model_var + b * b)
+        z2 = z2[z2 <= k * k * max(1.0, float(np.median(z2)))]
+        return float(np.mean(z2)) if len(z2) else 0.0
+
+    if msq(0.0) <= 1.0:
+        return 0.0
+    lo, hi = 0.0, float(np.sqrt(np.max(err**2))) + 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if msq(mid) > 1.0 else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
 def estimate(samples: NoiseSamples) -> dict:
     """The configuration document ``{noise: {sigma_img, boundary_px}, odometry: {...}}`` the samples give
     (keys whose samples are missing are left out), and ``counts`` of the samples used."""
@@ -164,8 +185,7 @@ def estimate(samples: NoiseSamples) -> dict:
     for snapped, key in ((True, "boundary_px"), (False, "free_boundary_px")):
         err = np.asarray(samples.boundary_err[snapped])
         if len(err) >= 4:
-            excess = clipped_rms(err) ** 2 - float(np.mean(samples.boundary_model2[snapped]))
-            doc["noise"][key] = round(float(np.sqrt(max(excess, 0.0))), 3)
+            doc["noise"][key] = round(missing_sigma(err, np.asarray(samples.boundary_model2[snapped])), 3)
     o = np.asarray(samples.odometry, dtype=float).reshape(-1, 6)
     r1, tr, r2, e1, et, e2 = o.T
     turn = r1 + r2

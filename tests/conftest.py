@@ -29,9 +29,12 @@ def lab_first_frame(lab_sim):
 
 @pytest.fixture(scope="session")
 def lab_first_view(lab_scenario, lab_sim, lab_first_frame):
-    """The full pipeline on the lab's first view with the start pose as prior."""
+    """The full pipeline on the lab's first view with the start pose as prior, with the paper's noise values
+    (the ``paper`` preset, which reproduces Table 1)."""
+    from stablemarks.config import Config
     from stablemarks.pipeline import process_frame
 
     camera = lab_scenario.camera.with_pan(lab_sim.pans[0])
     X0 = lab_sim.poses[0].as_array()
-    return process_frame(lab_first_frame.left, lab_first_frame.right, camera, lab_scenario.map, X0, COV_PRIOR)
+    return process_frame(lab_first_frame.left, lab_first_frame.right, camera, lab_scenario.map, X0, COV_PRIOR,
+                         Config.preset("paper"))

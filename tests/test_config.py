@@ -40,7 +40,7 @@ def test_a_derived_setting_cannot_be_set_on_its_own(section, key):
 def test_sigma_img_reaches_the_plane_gates_the_feature_model_and_the_filter():
     camera = StereoCamera()
     wide = Config().with_overrides({"noise": {"sigma_img": 2.0}})
-    assert wide.camera(camera).sigma_img == 2.0 and Config().camera(camera) is camera
+    assert wide.camera(camera).sigma_img == 2.0 and Config.preset("paper").camera(camera) is camera
     # the filter's observation noise
     loc = Localizer(MAP, camera, start_pose=X, config=wide)
     assert loc.ekf.camera.sigma_img == 2.0

@@ -134,14 +134,16 @@ def test_records_replay_the_filter(lab_short, lab_scenario):
     from stablemarks.estimation import JointEKF, NewLandmark
 
     run, result = lab_short
-    ekf = JointEKF(lab_scenario.camera, SimulatedSource(run).initial_pose, result.cov0)
+    from stablemarks.config import Config
+
+    ekf = JointEKF(Config().camera(lab_scenario.camera), SimulatedSource(run).initial_pose, result.cov0)
     for rec in result.records:
         if rec.odometry is not None:
             ekf.predict(rec.odometry, rec.cov_odometry)
         for i in rec.dropped:
             ekf.remove_landmark(i)
         if rec.inflation != 1.0:
-            ekf.inflate_pose(rec.inflation)
+            ekf.inflate_pose(rec.inflation, position_only=True)
         if rec.measurements:
             ekf.update([(i, (ul, ur)) for i, ul, ur in rec.measurements], rec.pan, frame=rec.index,
                        iterations=1 if rec.inflation == 1.0 else 5)

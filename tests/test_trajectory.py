@@ -7,7 +7,7 @@ import pytest
 
 from stablemarks.errors import InputError
 from stablemarks.geometry import wrap_angle
-from stablemarks.io.trajectory import TUM_HEADER, read_tum, write_kitti, write_tum
+from stablemarks.io.trajectory import TUM_HEADER, read_tum, write_tum
 
 
 def random_poses(rng, n):
@@ -33,7 +33,7 @@ def test_tum_text_is_what_evo_reads(tmp_path):
     path = write_tum(tmp_path / "t.tum", [0.0, 0.5], poses)
     lines = path.read_text().splitlines()
     assert lines[0] == TUM_HEADER
-    assert lines[1] == "0.000000000 1.000000 2.000000 0 0 0 0.707106781 0.707106781"
+    assert lines[1] == "0.000000000 1.000000000 2.000000000 0 0 0 0.707106781187 0.707106781187"
     for line in lines[1:]:  # evo: csv with a single space, 8 entries, no trailing delimiter
         assert len(line.split(" ")) == 8
     m = np.loadtxt(path, comments="#")
@@ -90,13 +90,3 @@ def test_write_tum_checks_shapes_and_leaves_no_file(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_kitti_lines_are_row_major_3x4(tmp_path):
-    rng = np.random.default_rng(1)
-    poses = random_poses(rng, 6)
-    m = np.loadtxt(write_kitti(tmp_path / "k.txt", poses))
-    assert m.shape == (6, 12)
-    for row, (x, y, th) in zip(m, poses, strict=True):
-        T = row.reshape(3, 4)
-        np.testing.assert_allclose(T[:, 3], [x, y, 0.0], atol=1e-8)
-        np.testing.assert_allclose(T[:, :3], [[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]],
-                                   atol=1e-9)

@@ -39,14 +39,23 @@ class HealthConfig:
     blind_frames: int = 10
     max_inflation: float = 1e4
     """Largest factor the pose covariance is widened by to fit a disagreeing pattern."""
+    min_pattern: int = 3
+    """A wall's pattern must match at least this many landmarks to count as evidence that the odometry is
+    wrong (two lines can be matched one feature over, or be fitted by a translation where a wrong pan turned the
+    view)."""
+    search_inflation: float = 25.0
+    """When the walls are not found where the prediction puts them, they are looked for again with the pose
+    covariance widened by this factor (5 σ for 1 σ), before a slip or kidnap can be recognised."""
 
     def __post_init__(self) -> None:
-        for name in ("edges_frames", "nis_frames", "disagree_frames", "blind_frames"):
+        for name in ("edges_frames", "nis_frames", "disagree_frames", "blind_frames", "min_pattern"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(expected("a positive integer", v, where=f"health.{name}"))
-        if not (isinstance(self.max_inflation, int | float) and self.max_inflation >= 1):
-            raise ConfigError(expected("a number >= 1", self.max_inflation, where="health.max_inflation"))
+        for name in ("max_inflation", "search_inflation"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 1:
+                raise ConfigError(expected("a number >= 1", v, where=f"health.{name}"))
 
 
 MESSAGES = {

@@ -149,11 +149,14 @@ class Estimate:
 
 
 def _edges_missing(model: FrameLandmarks | None) -> bool:
-    """Whether a free edge searched in this frame (predicted in the searchable image, see
-    :func:`~stablemarks.landmarks.landmarks_on_plane`) was not found, or found where the map does not put it."""
+    """Whether a free edge expected in this frame was not found where the map puts it: searched and not found
+    (or rejected), or on a plane predicted in view that was not found at all."""
     if model is None:
         return False
-    return any(len(m.boundaries) < len(m.searched) for m in model.planes)
+    if any(len(m.boundaries) < len(m.searched) for m in model.planes):
+        return True
+    return any(not fit and any(e.free and np.all(np.isfinite(e.u)) for e in pred.edges.values())
+               for pred, fit in zip(model.predictions, model.fits, strict=True))
 
 
 def landmark_map_document(ekf: JointEKF, method: str = "stablemarks") -> dict:
@@ -247,14 +250,16 @@ class Localizer:
 
     # ----------------------------------------------------------------- steps
     def _widen_to_fit(self, pattern: list[tuple[int, int]], front: FrontEnd, pan: float) -> float:
-        """Widen the pose covariance by factors of 4 until ``pattern`` (landmark id, pair index) fits as a typical
-        sample (its joint NIS at most its mean, ``2 · len(pattern)``; merely inside the 99 % gate would leave the
-        pose overconfident after the update), up to ``health.max_inflation``; returns the factor used."""
+        """Widen the position covariance by factors of 4 until ``pattern`` (landmark id, pair index) fits as a
+        typical sample (its joint NIS at most its mean, ``2 · len(pattern)``; merely inside the 99 % gate would
+        leave the pose overconfident after the update), up to ``health.max_inflation``; returns the factor used.
+        Only the position: a wheel slip or a kidnap moves the robot, and a heading that the images would turn far
+        beyond its odometry is more likely a wrong head pan, which must not be absorbed into the pose."""
         pairs = front.kept_pairs
         measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
         factor = 1.0
         while factor * 4.0 <= self.config.health.max_inflation:
-            self.ekf.inflate_pose(4.0)
+            self.ekf.inflate_pose(4.0, position_only=True)
             factor *= 4.0
             if self.ekf.joint_nis(pattern, measured, pan) <= 2 * len(pattern):
                 break
@@ -350,8 +355,17 @@ class Localizer:
             pan_suspect = self.health.suspect_edges(edges_missing)
             report: dict = {}
             assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report)
+            if not pan_suspect and model is not None and (edges_missing or not assoc) and self.ekf.visible(pan):
+                # the walls are not where the prediction puts them: look again with wider gates (a slip or a
+                # kidnap moves them beyond the bands of a confident pose)
+                wide = method.model(front, cam_k, self.world_map, self.ekf.pose,
+                                    self.ekf.cov_pose * self.config.health.search_inflation, self.config)
+                wide_report: dict = {}
+                method.associate(self.ekf, front, wide, pan, cam_k, wide_report)
+                if wide_report.get("incompatible") and not wide_report.get("compatible"):
+                    model, report = wide, wide_report
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
-                max(len(m) for m in report["incompatible"]) >= 2
+                max(len(m) for m in report["incompatible"]) >= self.config.health.min_pattern
             if disagree and self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
                 record.inflation = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
                 assoc = method.associate(self.ekf, front, model, pan, cam_k)

@@ -520,12 +520,14 @@ class JointEKF:
         finally:
             self._x[:3] = saved
 
-    def inflate_pose(self, factor: float) -> None:
-        """Widen the pose covariance: ``P_XX ← factor · P_XX`` (``factor ≥ 1``), cross-covariances kept. The
-        change adds the PSD block ``(factor − 1) P_XX``, so ``P`` stays PSD (recovery from a slip or kidnap)."""
+    def inflate_pose(self, factor: float, *, position_only: bool = False) -> None:
+        """Widen the pose covariance: ``P_XX ← factor · P_XX`` (``factor ≥ 1``; with ``position_only`` the
+        ``(x, y)`` block alone), cross-covariances kept. The change adds a PSD block (``(factor − 1)`` times a
+        diagonal block of ``P``), so ``P`` stays PSD (recovery from a slip or kidnap)."""
         if not (np.isfinite(factor) and factor >= 1.0):
             raise InputError(expected("a factor >= 1", factor, where="inflate_pose.factor"))
-        self._P[:3, :3] *= factor
+        k = 2 if position_only else 3
+        self._P[:k, :k] *= factor
 
     # ------------------------------------------------------------------ add
     def add_landmarks(self, new: Sequence[NewLandmark], cov_new, *, cov_pose_new=None,

@@ -382,3 +382,23 @@ def test_middlebury_motorcycle_accuracy():
     bm = compute_disparity(left, right, stereobm)  # measured: 70.7 % valid, 7.3 % and 5.5 % bad
     assert bad1 < bm.bad_fraction(truth, 1.0) and bad2 < bm.bad_fraction(truth, 2.0)
     assert bm.bad_fraction(truth, 2.0) > 0.04  # the comparison is against the known figure, not a broken BM
+
+
+@pytest.mark.parametrize("block_size", [9, 15, 19])
+def test_texture_test_equals_the_opencv_box_filter(block_size):
+    """The kernel sums the texture itself (uint16 sums up to 16×16 windows, int32 beyond): the same pixels pass
+    as with OpenCV's box filter of ``|Sobel_x|`` that the OpenCV backend uses."""
+    from stablemarks.vision.area_stereo import _textured, _xsobel
+
+    data = pytest.importorskip("skimage.data")
+    left_rgb, right_rgb, _ = data.stereo_motorcycle()
+    left = cv2.cvtColor(left_rgb, cv2.COLOR_RGB2GRAY)
+    right = cv2.cvtColor(right_rgb, cv2.COLOR_RGB2GRAY)
+    config = SADConfig(block_size=block_size, num_disparities=16, uniqueness_ratio=0, lr_tolerance=1e6,
+                       texture_threshold=2.0)  # fmt: skip
+    res = compute_disparity(left, right, config)
+    r = block_size // 2
+    inside = (slice(r, left.shape[0] - r), slice(r + 15, left.shape[1] - r))  # every disparity fits
+    want = _textured(_xsobel(left), config)[inside]
+    assert 0.2 < want.mean() < 0.95  # both outcomes occur
+    np.testing.assert_array_equal(res.valid[inside], want)

@@ -12,7 +12,7 @@ import yaml
 
 from stablemarks.cli import main
 from stablemarks.io.calibration import save_camera_info_pair
-from stablemarks.io.trajectory import read_tum
+from stablemarks.io.trajectory import kitti_camera_poses, read_tum
 
 from .test_sources import N_FRAMES, lab_recording, lab_stamps, write_lab_inputs, write_lab_sequence
 
@@ -58,7 +58,9 @@ def test_run_on_a_ros2_bag_writes_the_run_folder(lab, tmp_path, capsys):
     np.testing.assert_allclose(poses, [r["pose"] for r in log], atol=1e-6)
     kitti = np.loadtxt(out / "trajectory.kitti")
     assert kitti.shape == (N_FRAMES, 12)
-    np.testing.assert_allclose(kitti[:, [3, 7]], poses[:, :2], atol=1e-6)
+    mount = yaml.safe_load(lab["mount"].read_text())["mount"]
+    expected = kitti_camera_poses(poses, [r["pan"] for r in log], mount=(mount["x"], mount["y"]))
+    np.testing.assert_allclose(kitti.reshape(-1, 3, 4), np.asarray(expected).reshape(-1, 3, 4), atol=1e-6)
     assert yaml.safe_load((out / "landmarks.yaml").read_text())["frame"] == "map"
 
 
@@ -94,7 +96,8 @@ def test_readme_command_calibration_pair_map_server_map_and_ros2_bag(lab, tmp_pa
     stamps, poses = read_tum(out / "trajectory.tum")
     assert len(stamps) == N_FRAMES
     landmarks = yaml.safe_load((out / "landmarks.yaml").read_text())["landmarks"]
-    assert landmarks and {lm["plane"] for lm in landmarks} <= {"wall01", "wall02"}  # walls extracted from the grid
+    # walls extracted from the grid: each of the lab's two walls has two faces
+    assert landmarks and {lm["plane"] for lm in landmarks} <= {"wall01", "wall02", "wall03", "wall04"}
 
 
 def test_run_on_our_folder_keeps_its_behaviour(tmp_path, capsys):

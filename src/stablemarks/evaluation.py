@@ -76,10 +76,10 @@ import numpy as np
 
 from .config import Config
 from .errors import InputError, expected
-from .metrics import along_wall_nees, ate_rmse, chi2_bounds, fraction_inside, pose_nees, position_errors, reobservation
 from .frames import Frame
 from .localizer import Estimate, Localizer
 from .methods import METHODS
+from .metrics import along_wall_nees, ate_rmse, chi2_bounds, fraction_inside, pose_nees, position_errors, reobservation
 from .online import OnlineResult, run_online
 from .sim.run import Run, simulate_run
 from .sim.scenario import Scenario, load_scenario
@@ -283,27 +283,69 @@ def run_trials(trials: Sequence[Trial]) -> list[dict]:
         if (t.scenario, t.seed, t.frames, t.cov0.tobytes(), t.config) != same:
             raise InputError(expected(f"tasks of one run ({first.scenario} seed {first.seed})",
                                       f"{t.scenario} seed {t.seed}", where="run_trials"))
-    scenario = load_scenario(first.scenario)
-    run = truncate_run(simulate_run(scenario, first.seed), first.frames)
-    runs: dict[str, tuple[TruthObserver, OnlineResult]] = {}
+    try:
+        scenario = load_scenario(first.scenario)
+        run = truncate_run(simulate_run(scenario, first.seed), first.frames)
+    except Exception as exc:  # noqa: BLE001 - every task of this run fails alike, the others go on
+        return [failed_result(t, first.scenario, exc) for t in trials]
+    runs: dict[str, tuple[TruthObserver, OnlineResult] | Exception] = {}
 
     def online(method: str) -> tuple[TruthObserver, OnlineResult]:
         if method not in runs:
-            source = SimulatedSource(run)
-            truth = TruthObserver()
-            config = first.config.with_source_defaults(source.config_defaults)
-            result = run_online(source, start_pose=start_belief(run, first.cov0), start_cov=first.cov0,
-                                config=config, method=method, observers=[truth])
-            runs[method] = truth, truth.result(result)
-        return runs[method]
+            try:
+                source = SimulatedSource(run)
+                truth = TruthObserver()
+                config = first.config.with_source_defaults(source.config_defaults)
+                result = run_online(source, start_pose=start_belief(run, first.cov0), start_cov=first.cov0,
+                                    config=config, method=method, observers=[truth])
+                runs[method] = truth, truth.result(result)
+            except Exception as exc:  # noqa: BLE001 - recorded once, raised for every task that needs the run
+                runs[method] = exc
+        done = runs[method]
+        if isinstance(done, Exception):
+            raise done
+        return done
 
     out = []
     for t in trials:
-        if t.method == SMOOTHER:
-            out.append(_smoothed_measures(t, scenario, *online("stablemarks")))
-        else:
-            out.append(_online_measures(t, scenario, *online(t.method)))
+        try:
+            if t.method == SMOOTHER:
+                try:
+                    base = online("stablemarks")
+                except Exception as exc:  # noqa: BLE001
+                    raise TrialFailure(f"the stablemarks run it smooths failed: {_describe(exc)}") from exc
+                out.append(_smoothed_measures(t, scenario, *base))
+            else:
+                out.append(_online_measures(t, scenario, *online(t.method)))
+        except Exception as exc:  # noqa: BLE001 - one failing task must not end the evaluation
+            out.append(failed_result(t, scenario.name, exc))
     return out
+
+
+class TrialFailure(RuntimeError):
+    """A task of the evaluation could not be measured (its message says why)."""
+
+
+def _describe(exc: BaseException) -> str:
+    """``ExceptionClass: message`` of a task's failure, on one line (:func:`~stablemarks.errors.one_line`)."""
+    from .errors import one_line
+
+    if isinstance(exc, TrialFailure):
+        return one_line(str(exc), 500)
+    text = str(exc).strip()
+    return one_line(f"{type(exc).__name__}: {text}" if text else type(exc).__name__, 500)
+
+
+def failed_result(trial: Trial, scenario: str, exc: BaseException) -> dict:
+    """The line of ``trials.jsonl`` for a task that failed: ``scenario, trial, seed, method`` and ``error`` (the
+    exception's class and message); it has none of the measures and :func:`summarize` leaves it out."""
+    return {"scenario": scenario, "trial": trial.index, "seed": trial.seed, "method": trial.method,
+            "error": _describe(exc)}
+
+
+def failures(results: Sequence[dict]) -> list[dict]:
+    """The tasks of ``results`` that failed (:func:`failed_result`), in order."""
+    return [r for r in results if r.get("error") is not None]
 
 
 def _online_measures(trial: Trial, scenario: Scenario, source: TruthObserver, result: OnlineResult) -> dict:
@@ -327,7 +369,8 @@ def _smoothed_measures(trial: Trial, scenario: Scenario, source: TruthObserver, 
     start = time.perf_counter()
     smoothed = batch_smooth(result, scenario.camera, trial.config)
     per_frame = (time.perf_counter() - start) / len(result.records)
-    estimates = {lid: (lm.position, lm.cov2d) for lid, lm in smoothed.landmarks.items()}
+    # a landmark the smoother could not constrain has no marginal (smoother.WEAK_LANDMARK_SIGMA): left out
+    estimates = {lid: (lm.position, lm.cov2d) for lid, lm in smoothed.landmarks.items() if lm.cov2d is not None}
     out = _measures(trial, scenario, source, result, smoothed.poses, smoothed.cov_poses, estimates, nis=[],
                     time_per_frame=per_frame, stage_times={"smooth": per_frame})
     out["rejected_truth"] = []  # the full method's selection, not the smoother's
@@ -501,7 +544,12 @@ def evaluate(trials: Sequence[Trial], *, jobs: int = 1, backend: str = "loky", a
     order = {(t.scenario, t.index, t.method): k for k, t in enumerate(trials)}
     names = {t.scenario: load_scenario(t.scenario).name for t in trials}
     rank = {(names[s], i, m): k for (s, i, m), k in order.items()}
-    return sorted(results, key=lambda r: rank[(r["scenario"], r["trial"], r["method"])])
+
+    def key(r):  # a task whose scenario failed to load carries the name it was given
+        k = (r["scenario"], r["trial"], r["method"])
+        return rank.get(k, order.get(k, len(order)))
+
+    return sorted(results, key=key)
 
 
 # ------------------------------------------------------------- aggregation
@@ -522,6 +570,8 @@ def summarize(results: Sequence[dict]) -> dict:
     the N-trial average pose NEES)."""
     groups: dict[str, dict[str, list[dict]]] = {}
     for r in results:
+        if r.get("error") is not None:  # a failed task (failed_result): reported, not measured
+            continue
         groups.setdefault(r["scenario"], {}).setdefault(r["method"], []).append(r)
     out: dict = {}
     for scen, by_method in groups.items():
@@ -707,13 +757,23 @@ def format_value(value, fmt: str) -> str:
     return fmt.format(value)
 
 
-def report_markdown(summary: dict, goals: Sequence[Goal], figures: dict[str, str], meta: dict) -> str:
-    """The Markdown report: settings, one table per scenario, the goals, the figures, the definitions.
+def report_markdown(summary: dict, goals: Sequence[Goal], figures: dict[str, str], meta: dict,
+                    failed: Sequence[dict] = ()) -> str:
+    """The Markdown report: settings, the failed tasks, one table per scenario, the goals, the figures, the
+    definitions.
 
-    ``figures``: ``{name: relative path}``; ``meta``: settings to list (trials, jobs, backend, seed, …).
+    ``figures``: ``{name: relative path}``; ``meta``: settings to list (trials, jobs, backend, seed, …);
+    ``failed``: the tasks that failed (:func:`failures`), listed with their messages and left out of the tables.
     """
     lines = ["# stablemarks evaluation", ""]
     lines += [f"- {k}: {v}" for k, v in meta.items()]
+    if failed:
+        lines += ["", "## Failed tasks", "",
+                  f"{len(failed)} task(s) failed; they are left out of the tables below (the other trials went on).",
+                  "", "| scenario | trial | seed | method | error |", "|---|---:|---:|---|---|"]
+        for r in failed:
+            message = str(r["error"]).replace("|", "\\|")
+            lines.append(f"| {r['scenario']} | {r['trial']} | {r['seed']} | {r['method']} | {message} |")
     for scen, by_method in summary.items():
         first = next(iter(by_method.values()))
         lines += ["", f"## {scen}", "",

@@ -31,11 +31,18 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .errors import ConfigError, expected
+from .errors import ConfigError, expected, short_repr
 from .geometry import StereoCamera
 
 _ID = re.compile(r"^[A-Za-z0-9_\-]+$")
 SIDES = ("both", "left", "right")
+
+COORDINATE_LIMIT = 1e6
+"""Largest magnitude of a coordinate [m] (and of any number read by :func:`_number` unless told otherwise):
+1000 km is far beyond any building, and squares and products of such numbers stay exact enough and finite."""
+
+STAMP_LIMIT = 1e12
+"""Largest magnitude of a time stamp [s] read from a file (about 31,700 years)."""
 
 
 @dataclass(frozen=True)
@@ -176,10 +183,20 @@ class Map:
 
 
 # ---------------------------------------------------------------- parsing
-def _number(v, where: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+def _number(v, where: str, limit: float = COORDINATE_LIMIT) -> float:
+    """``v`` as a float: a finite YAML/JSON number (not a boolean) of magnitude at most ``limit``; else a
+    one-line :class:`ConfigError` naming ``where``. Integers of any size are fine to pass (no overflow)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
         raise ConfigError(expected("a finite number", v, where=where))
-    return float(v)
+    try:
+        value = float(v)
+    except OverflowError:  # an integer beyond the float range
+        value = math.inf
+    if not math.isfinite(value):
+        raise ConfigError(expected("a finite number", v, where=where))
+    if abs(value) > limit:
+        raise ConfigError(expected(f"a number within ±{limit:g}", v, where=where))
+    return value
 
 
 def _pair(v, where: str, what: str = "a list of 2 numbers [x, y] in metres") -> tuple[float, float]:
@@ -193,9 +210,9 @@ def parse_plane(data: object, where: str) -> ReferencePlane:
     if not isinstance(data, dict):
         raise ConfigError(expected("a mapping with id, p1, p2", data, where=where))
     known = {"id", "name", "p1", "p2", "free_edges", "z", "visible_from", "reference"}
-    unknown = sorted(set(data) - known)
+    unknown = sorted(set(data) - known, key=str)  # keys of any type: `~:` is None, `1:` an int
     if unknown:
-        raise ConfigError(f"{where}: unknown field {unknown[0]!r} (known: {', '.join(sorted(known))})")
+        raise ConfigError(f"{where}: unknown field {short_repr(unknown[0])} (known: {', '.join(sorted(known))})")
     for key in ("id", "p1", "p2"):
         if key not in data:
             raise ConfigError(f"{where}: missing field {key!r}")
@@ -237,6 +254,8 @@ def parse_map(data: object, source: str = "map") -> Map:
     planes = data["planes"]
     if not isinstance(planes, list):
         raise ConfigError(expected("a list of walls", planes, where=f"{source}: planes"))
+    if not planes:
+        raise ConfigError(f"{source}: planes: expected at least one wall, got an empty list")
     frame = data.get("frame", "map")
     if not isinstance(frame, str):
         raise ConfigError(expected("a frame name", frame, where=f"{source}: frame"))
@@ -244,22 +263,177 @@ def parse_map(data: object, source: str = "map") -> Map:
     return Map(parsed, frame, source)
 
 
+# ------------------------------------------------------------------- YAML
+MAX_YAML_DEPTH = 100
+"""Deepest nesting of lists and mappings a YAML document may have."""
+
+MAX_YAML_EXPANSION = 100_000
+"""How many more nodes a YAML document may have with its aliases expanded than written out (an "alias
+bomb", a few lines that expand to billions of nodes, is refused)."""
+
+MAX_YAML_DIGITS = 25
+"""Longest integer a YAML document may hold, in digits (int64 needs 19); longer ones are refused before
+they are converted."""
+
+INT64_MAX = 2**63 - 1
+
+_YAML_BASE = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class YAMLLimitError(yaml.MarkedYAMLError):
+    """A YAML document breaks one of the strict loader's rules (duplicate key, huge integer, alias bomb)."""
+
+
+class StrictYAMLLoader(_YAML_BASE):  # type: ignore[misc, valid-type]
+    """``yaml.safe_load``'s loader, stricter: a key repeated in one mapping, an integer beyond int64, a
+    timestamp that is no date, nesting deeper than :data:`MAX_YAML_DEPTH` and alias expansion beyond
+    :data:`MAX_YAML_EXPANSION` are errors (:class:`YAMLLimitError`, with the line) instead of a silent
+    last-one-wins, an overflow deep inside a validator or a loader that never returns."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen: dict = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.setdefault(key, key_node)
+                except TypeError:  # unhashable: the base class says so
+                    continue
+                if first is not key_node:
+                    raise YAMLLimitError("while constructing a mapping", node.start_mark,
+                                         f"duplicate key {short_repr(key, 60)} (first at line "
+                                         f"{first.start_mark.line + 1})", key_node.start_mark)
+        return super().construct_mapping(node, deep=deep)
+
+    def construct_yaml_int(self, node):
+        digits = sum(ch.isdigit() for ch in str(node.value))
+        if digits > MAX_YAML_DIGITS:
+            raise YAMLLimitError(None, None, f"integer of {digits} digits is out of range (at most "
+                                 f"{INT64_MAX} in magnitude)", node.start_mark)
+        value = super().construct_yaml_int(node)
+        if abs(value) > INT64_MAX:
+            raise YAMLLimitError(None, None, f"integer {short_repr(value, 40)} is out of range (at most "
+                                 f"{INT64_MAX} in magnitude)", node.start_mark)
+        return value
+
+    def construct_yaml_timestamp(self, node):
+        try:
+            return super().construct_yaml_timestamp(node)
+        except (ValueError, OverflowError) as exc:
+            raise YAMLLimitError(None, None, f"{short_repr(node.value, 40)} is not a valid date: {exc}",
+                                 node.start_mark) from None
+
+
+StrictYAMLLoader.add_constructor("tag:yaml.org,2002:int", StrictYAMLLoader.construct_yaml_int)
+StrictYAMLLoader.add_constructor("tag:yaml.org,2002:timestamp", StrictYAMLLoader.construct_yaml_timestamp)
+
+
+def _check_node_graph(root) -> None:
+    """Refuse a composed document that nests deeper than :data:`MAX_YAML_DEPTH`, refers to itself through an
+    alias, or whose aliases expand it by more than :data:`MAX_YAML_EXPANSION` nodes (iterative: no recursion;
+    scalars, most of a document, are counted without a visit of their own)."""
+    scalar = yaml.ScalarNode
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    on_path: set[int] = set()
+    distinct = 0
+
+    def children(n):
+        if isinstance(n, yaml.SequenceNode):
+            return n.value
+        return [c for pair in n.value for c in pair]  # a mapping
+
+    if isinstance(root, scalar):
+        return
+    stack = [(root, False)]
+    while stack:
+        n, done = stack.pop()
+        key = id(n)
+        if done:
+            on_path.discard(key)
+            total, deepest = 1, 0
+            for c in children(n):
+                if isinstance(c, scalar):
+                    total += 1
+                    deepest = max(deepest, 1)
+                else:
+                    total += size[id(c)]
+                    deepest = max(deepest, depth[id(c)])
+            size[key], depth[key] = total, deepest + 1
+            if deepest + 1 > MAX_YAML_DEPTH:
+                raise YAMLLimitError(None, None, f"nested deeper than {MAX_YAML_DEPTH} levels", n.start_mark)
+            continue
+        if key in size:
+            continue
+        on_path.add(key)
+        stack.append((n, True))
+        for c in children(n):
+            if isinstance(c, scalar):
+                distinct += 1  # shared scalars (aliases of a scalar) are counted again: harmless
+                continue
+            if id(c) in on_path:
+                raise YAMLLimitError(None, None, "an alias refers to a node that contains it (a recursive "
+                                     "structure)", c.start_mark)
+            if id(c) not in size:
+                stack.append((c, False))
+    written = distinct + len(size)
+    if size[id(root)] > written + MAX_YAML_EXPANSION:
+        raise YAMLLimitError(None, None, f"its aliases expand it to {short_repr(size[id(root)], 30)} nodes from "
+                             f"{written} written (at most {MAX_YAML_EXPANSION} more are allowed)", root.start_mark)
+
+
+def load_yaml_text(text: str) -> object:
+    """Parse one YAML document with :class:`StrictYAMLLoader`; raises :class:`yaml.YAMLError` (with a mark
+    where there is one) for anything malformed or beyond the loader's limits."""
+    loader = StrictYAMLLoader(text)
+    try:
+        try:
+            node = loader.get_single_node()
+        except RecursionError:
+            raise YAMLLimitError(None, None, "nested too deeply", None) from None
+        if node is None:
+            return None
+        _check_node_graph(node)
+        try:
+            return loader.construct_document(node)
+        except RecursionError:
+            raise YAMLLimitError(None, None, "nested too deeply", node.start_mark) from None
+    finally:
+        loader.dispose()
+
+
+def yaml_error_text(exc: yaml.YAMLError) -> str:
+    """``at line L, column C: problem`` (or just the problem) of a YAML error, for one-line messages."""
+    mark = getattr(exc, "problem_mark", None)
+    at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+    problem = getattr(exc, "problem", None) or "invalid YAML"
+    return f"{at}: {problem}"
+
+
+def parse_yaml(text: str, source: str) -> object:
+    """Parse YAML ``text`` strictly (:func:`load_yaml_text`); errors become one :class:`ConfigError` line
+    ``SOURCE: invalid YAML at line L, column C: problem``."""
+    try:
+        return load_yaml_text(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{source}: invalid YAML{yaml_error_text(exc)}") from None
+
+
 def read_yaml(path: str | Path, what: str = "file") -> object:
-    """Read a YAML file; a missing file or a syntax error becomes a one-line :class:`ConfigError`."""
+    """Read a YAML file strictly (:func:`parse_yaml`: duplicate keys, integers beyond int64, alias bombs and
+    deep nesting are errors); a missing file or a syntax error becomes a one-line :class:`ConfigError`."""
     path = Path(path)
     try:
         text = path.read_text()
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such {what}") from None
-    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
+    except (IsADirectoryError, NotADirectoryError, PermissionError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read {what}: {exc.__class__.__name__}") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or "invalid YAML"
-        raise ConfigError(f"{path}: invalid YAML{at}: {problem}") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read {what}: {exc.strerror or exc.__class__.__name__}") from None
+    return parse_yaml(text, str(path))
 
 
 def load_map(path: str | Path) -> Map:

@@ -43,8 +43,10 @@ from .motion import decompose
 from .pipeline import run_front_end
 from .planes import fit_plane, plane_members, predict_planes
 
-TRUE_POSE_COV = np.diag([1e-4, 1e-4, 1e-4]) ** 2
-"""Pose covariance used to predict the planes from the true pose (essentially none)."""
+SEARCH_POSE_COV = np.diag([0.02, 0.02, np.radians(0.5)]) ** 2
+"""Pose covariance with which the planes are predicted from the true pose: the windows (and so the boundary
+search) as wide as the filter's own in a typical frame, so that a boundary can be found where the images put
+it, not clipped to the true edge by a window a few pixels wide."""
 
 
 @dataclass
@@ -109,7 +111,7 @@ def _odometry_sample(prev, cur) -> tuple[float, ...]:
 def _image_samples(out: NoiseSamples, frame, T, camera, unit, world_map, config: Config) -> None:
     front = run_front_end(frame.left, frame.right, config)
     pairs = front.kept_pairs
-    for pred in predict_planes(camera, T, TRUE_POSE_COV, world_map, config.planes):
+    for pred in predict_planes(camera, T, SEARCH_POSE_COV, world_map, config.planes):
         fit = fit_plane(camera, T, front.disparity.left, pred, config.planes)
         if not fit:
             continue

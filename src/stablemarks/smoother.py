@@ -10,7 +10,14 @@ squares problem solved by GTSAM's Levenberg–Marquardt (the optional ``gtsam`` 
   wall with the group's full covariance (the shared boundary error, DESIGN §4);
 - one factor per observation the filter used: ``(u_l, u_r) = J(X_k, P(s_j))`` with the frame's pan and
   ``R = σ_img² I`` (Eqs 3 and 20), with the analytic Jacobians of
-  :meth:`StereoCamera.project_columns <stablemarks.geometry.StereoCamera.project_columns>`.
+  :meth:`StereoCamera.project_columns <stablemarks.geometry.StereoCamera.project_columns>`;
+- a weak prior (σ = :data:`WEAK_LANDMARK_SIGMA`) on every landmark at the filter's value, so that a landmark
+  nothing else constrains does not make the system indeterminate.
+
+The marginals come from GTSAM; where its factorization finds the system numerically indeterminate (turns on
+the spot give the odometry an information of 10¹² across the track, a far landmark seen nearly along its wall
+one near 1), from the dense information matrix scaled to unit diagonal (:func:`_marginals`). A landmark no
+better known than its weak prior has no marginal (``var_s`` None).
 
 The data associations are the filter's; only the estimation differs. The filter's covariances are over
 world ``(x, y, theta)`` and additive increments, gtsam's over the tangent space of ``Pose2`` at the pose
@@ -32,6 +39,16 @@ from .geometry import SE2, StereoCamera, rot2
 from .maps import ReferencePlane
 
 GTSAM_HINT = "the gtsam_batch smoother needs the optional gtsam extra: pip install 'stablemarks[gtsam]'"
+
+WEAK_LANDMARK_SIGMA = 100.0
+"""σ [m] of the weak prior every landmark gets at the filter's value: it changes nothing a landmark's
+observations or group prior determine (information 1e-4 m⁻² against ≥ 1 m⁻²), and keeps a landmark that
+nothing else constrains (one seen along its wall, or loaded from a prior map and barely observed) from making
+the system indeterminate. Such a landmark is left out of the marginals (``var_s`` None)."""
+
+MAX_DENSE_VARIABLES = 4000
+"""Largest number of scalar unknowns for which the marginals, when GTSAM's sparse factorization finds the
+system numerically indeterminate, are computed from the dense, scaled information matrix instead."""
 
 BEHIND_CAMERA_ERROR = 1e6
 """Residual [px] of an observation whose landmark falls behind the camera at a trial step: large and finite,
@@ -202,7 +219,9 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
                 raise InputError(expected("wall landmarks (a stablemarks or plane_no_selection run)",
                                           f"a {lm.kind} landmark (id {lid})", where="batch_smooth"))
             walls[lid] = (result.world_map[lm.plane_id], lm.edge)
-            initial.insert(L(lid), np.array([float(lm.value[0])]))
+            value = np.array([float(lm.value[0])])
+            initial.insert(L(lid), value)
+            graph.add(gtsam.PriorFactorVector(L(lid), value, gtsam.noiseModel.Isotropic.Sigma(1, WEAK_LANDMARK_SIGMA)))
         return walls[lid]
 
     for rec in records:
@@ -238,10 +257,9 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
     cov_poses = None
     var_s: dict[int, float | None] = dict.fromkeys(walls)
     if marginals:
-        m = gtsam.Marginals(graph, estimate)
-        cov_poses = np.array([tangent_to_world_cov(m.marginalCovariance(X(r.index)), poses[i, 2])
-                              for i, r in enumerate(records)]).reshape(K, 3, 3)
-        var_s = {lid: float(m.marginalCovariance(L(lid))[0, 0]) for lid in walls}
+        pose_keys = [X(r.index) for r in records]
+        tangent, var_s = _marginals(graph, estimate, pose_keys, {lid: L(lid) for lid in walls})
+        cov_poses = np.array([tangent_to_world_cov(c, poses[i, 2]) for i, c in enumerate(tangent)]).reshape(K, 3, 3)
     landmarks = {}
     for lid, (plane, edge) in sorted(walls.items()):
         s = float(estimate.atVector(L(lid))[0])
@@ -251,3 +269,52 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
                                           None if v is None else v * np.outer(t, t))
     return SmootherResult(poses, cov_poses, landmarks, int(optimizer.iterations()),
                           float(graph.error(initial)), float(graph.error(estimate)))
+
+
+def _marginals(graph, estimate, pose_keys: list[int], landmark_keys: dict[int, int]):
+    """Marginal covariances of the poses (tangent space, (3, 3) each) and variances of the landmarks (``{id:
+    var_s or None}``).
+
+    GTSAM's sparse marginals first. When it finds the system numerically indeterminate (a turn on the spot
+    has an odometry information of 10¹² across its track, a far landmark seen nearly along its wall one of 1:
+    a condition number beyond what its Cholesky factorization accepts), the same marginals come from the dense
+    information matrix at the optimum, scaled to unit diagonal and inverted through its eigenvalues. A landmark
+    whose marginal is no tighter than its weak prior (:data:`WEAK_LANDMARK_SIGMA`) is left out (None).
+    """
+    gtsam = _gtsam()
+    weak = 0.25 * WEAK_LANDMARK_SIGMA**2
+    try:
+        m = gtsam.Marginals(graph, estimate)
+        covs = [np.asarray(m.marginalCovariance(k)) for k in pose_keys]
+        var = {lid: float(m.marginalCovariance(k)[0, 0]) for lid, k in landmark_keys.items()}
+    except RuntimeError:
+        covs, var = _dense_marginals(graph, estimate, pose_keys, landmark_keys)
+    return covs, {lid: (v if np.isfinite(v) and 0.0 < v < weak else None) for lid, v in var.items()}
+
+
+def _dense_marginals(graph, estimate, pose_keys: list[int], landmark_keys: dict[int, int]):
+    """The fallback of :func:`_marginals`: the inverse of the scaled dense information matrix."""
+    gtsam = _gtsam()
+    n = 3 * len(pose_keys) + len(landmark_keys)
+    if n > MAX_DENSE_VARIABLES:
+        raise RuntimeError(f"the smoother's marginals: GTSAM found the system indeterminate and it has {n} "
+                           f"unknowns, more than the {MAX_DENSE_VARIABLES} the dense fallback takes")
+    ordering = gtsam.Ordering()
+    for k in [*pose_keys, *landmark_keys.values()]:
+        ordering.push_back(k)
+    H, _ = graph.linearize(estimate).hessian(ordering)
+    H = 0.5 * (H + H.T)
+    d = np.sqrt(np.clip(np.diag(H), 1e-300, None))
+    w, V = np.linalg.eigh(H / np.outer(d, d))
+    if not w[-1] > 0:
+        raise RuntimeError("the smoother's marginals: the information matrix has no positive eigenvalue")
+    floor = w[-1] * 1e-14  # directions below it are undetermined: a huge, finite variance
+    inv = 1.0 / np.maximum(w, floor)
+    cov = (V * inv) @ V.T
+    cov = cov / np.outer(d, d)
+    covs = [cov[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] for i in range(len(pose_keys))]
+    if not all(np.all(np.isfinite(c)) and np.all(np.linalg.eigvalsh(0.5 * (c + c.T)) > 0) for c in covs):
+        raise RuntimeError("the smoother's marginals: a pose is not determined by the data")
+    base = 3 * len(pose_keys)
+    var = {lid: float(cov[base + j, base + j]) for j, lid in enumerate(landmark_keys)}
+    return covs, var

@@ -1,17 +1,23 @@
-"""Helpers shared by the sub-commands: argument parsing of poses and loading the camera."""
+"""Helpers shared by the sub-commands: argument parsing of poses, checking the output before any work,
+loading the camera and the map, and the limits of the stereo settings for an image."""
 
 from __future__ import annotations
 
 import argparse
+import os
+import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError, expected
+from ..maps import COORDINATE_LIMIT
 
 
 def parse_triplet(text: str, what: str, option: str) -> np.ndarray:
-    """``"X,Y,THETA"`` → (3,) floats; the angle in radians, or in degrees with a ``deg`` suffix."""
+    """``"X,Y,THETA"`` → (3,) floats; the angle in radians, or in degrees with a ``deg`` suffix. Each value
+    finite and within ±:data:`~stablemarks.maps.COORDINATE_LIMIT` (metres or radians)."""
     parts = [p.strip() for p in str(text).split(",")]
     if len(parts) != 3:
         raise InputError(expected(f"{what} as three comma-separated numbers", text, where=option))
@@ -26,17 +32,109 @@ def parse_triplet(text: str, what: str, option: str) -> np.ndarray:
             raise InputError(expected(f"{what} as three comma-separated numbers", text, where=option)) from None
         if not np.isfinite(v):
             raise InputError(expected("finite numbers", text, where=option))
+        if abs(v) > COORDINATE_LIMIT:
+            raise InputError(expected(f"numbers within ±{COORDINATE_LIMIT:g}", text, where=option))
         out.append(v)
     return np.array(out)
+
+
+def parse_sigmas(text: str, option: str = "--pose-sigma") -> np.ndarray:
+    """``"SX,SY,STHETA"`` → (3,) standard deviations, each positive (a zero σ makes the covariance singular)."""
+    s = parse_triplet(text, "σx [m], σy [m], σθ [rad, or e.g. 2deg]", option)
+    if np.any(s < 0):
+        raise InputError(expected("non-negative standard deviations", text, where=option))
+    if np.any(s == 0):
+        raise InputError(expected("positive standard deviations (a zero σ makes the covariance singular)", text,
+                                  where=option))
+    return s
 
 
 def pose_prior(pose: str, sigma: str) -> tuple[np.ndarray, np.ndarray]:
     """``--pose`` and ``--pose-sigma`` → pose (3,) and its diagonal covariance (3, 3)."""
     X = parse_triplet(pose, "x [m], y [m], theta [rad, or e.g. 90deg]", "--pose")
-    s = parse_triplet(sigma, "σx [m], σy [m], σθ [rad, or e.g. 2deg]", "--pose-sigma")
-    if np.any(s < 0):
-        raise InputError(expected("non-negative standard deviations", sigma, where="--pose-sigma"))
-    return X, np.diag(np.maximum(s, 1e-9) ** 2)
+    s = parse_sigmas(sigma, "--pose-sigma")
+    return X, np.diag(s**2)
+
+
+def parse_pan(value: float | None, option: str = "--pan") -> float | None:
+    """A head pan [rad] from the command line: finite and within ±:data:`~stablemarks.maps.COORDINATE_LIMIT`."""
+    if value is None:
+        return None
+    if not (np.isfinite(value) and abs(value) <= COORDINATE_LIMIT):
+        raise InputError(expected(f"a finite angle [rad] within ±{COORDINATE_LIMIT:g}", value, where=option))
+    return float(value)
+
+
+# ------------------------------------------------------------------ the output, before any work
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except OSError:  # e.g. a parent we may not search
+        return False
+
+
+def check_out_dir(path: str | Path, *, option: str = "--out", inputs: Iterable[str | Path | None] = (),
+                  replaces: bool = False) -> Path:
+    """Check an output folder before any work: it is a folder or can be made one (not an existing file, not
+    under a file), we can write there (a probe file is created and removed: nothing is left), and it is not
+    an input folder nor inside one (``inputs``; with ``replaces``, the output folder may be replaced as a whole,
+    so no input may be inside it either). Returns the path; :class:`InputError` naming ``option`` otherwise."""
+    out = Path(path)
+    if _exists(out) and not out.is_dir():
+        raise InputError(f"{option}: {out} exists and is not a folder")
+    probe = out
+    while not _exists(probe) and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise InputError(f"{option}: {out}: {probe} is a file, so no folder can be made under it")
+    try:
+        fd, name = tempfile.mkstemp(prefix=".stablemarks-probe-", dir=probe)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        raise InputError(f"{option}: {out}: cannot write in {probe} ({exc.strerror or exc.__class__.__name__})") \
+            from None
+    here = out.resolve()
+    for item in inputs:
+        if item is None:
+            continue
+        src = Path(item).resolve()
+        if src.is_dir() and (here == src or src in here.parents):
+            raise InputError(f"{option}: {out} is the input {item} or inside it; write the results elsewhere")
+        if replaces and (src == here or here in src.parents):
+            raise InputError(f"{option}: {out} holds the input {item}; write the results elsewhere")
+    return out
+
+
+def check_out_file(path: str | Path, option: str) -> Path:
+    """Check an output file before any work: not a folder, its folder exists (or can be made) and is writable."""
+    out = Path(path)
+    if out.is_dir():
+        raise InputError(f"{option}: {out} is a folder; {option} names the file to write")
+    check_out_dir(out.parent if str(out.parent) else Path("."), option=option)
+    return out
+
+
+# ------------------------------------------------------------------ the stereo settings
+def check_image_settings(config, width: int, height: int, what: str) -> None:
+    """The SAD settings must fit the images (``width`` × ``height`` px, ``what`` names them): the block at
+    most the smaller image side, the disparity range inside the image width."""
+    sad = config.sad
+    if sad.block_size > min(width, height):
+        raise InputError(f"sad.block_size: expected an odd window of at most {min(width, height)} px (the smaller "
+                         f"side of {what}, {width}×{height} px), got {sad.block_size}")
+    top = sad.min_disparity + sad.num_disparities
+    if top > width or sad.min_disparity <= -width:
+        raise InputError(f"sad.num_disparities: expected a disparity range inside the image width ({what} is "
+                         f"{width} px wide), got {sad.min_disparity} to {top - 1} px "
+                         f"(sad.min_disparity {sad.min_disparity}, sad.num_disparities {sad.num_disparities})")
+
+
+def load_world_map(path: str | Path, what: str = "the command line"):
+    """The map of walls ``--map``: our map YAML, a ROS map_server map or GeoJSON walls, with at least one wall."""
+    from ..io.recorded import load_world_map as load
+
+    return load(path, what)
 
 
 def load_camera(calib: str | None, mount_path: str | None, near: str | Path):
@@ -79,8 +177,11 @@ def make_console():
 
 
 def parse_overrides(items: list[str]) -> dict:
-    """``["ekf.max_updates_per_frame=4", …]`` → ``{"ekf": {"max_updates_per_frame": 4}}`` (values read as YAML)."""
+    """``["ekf.max_updates_per_frame=4", …]`` → ``{"ekf": {"max_updates_per_frame": 4}}`` (values read as YAML,
+    strictly: :func:`~stablemarks.maps.load_yaml_text`)."""
     import yaml
+
+    from ..maps import load_yaml_text, yaml_error_text
 
     out: dict = {}
     for item in items:
@@ -89,9 +190,9 @@ def parse_overrides(items: list[str]) -> dict:
         if not (sep and dot and section and name and text.strip()):
             raise InputError(expected("SECTION.KEY=VALUE", item, where="--set"))
         try:
-            value = yaml.safe_load(text)
-        except yaml.YAMLError:
-            raise InputError(expected("a YAML value after '='", item, where="--set")) from None
+            value = load_yaml_text(text)
+        except yaml.YAMLError as exc:
+            raise InputError(f"--set: expected a YAML value after '=' in {item!r}{yaml_error_text(exc)}") from None
         out.setdefault(section, {})[name] = value
     return out
 
@@ -101,7 +202,7 @@ def load_run_config(args, source=None, base=None):
     then every ``--set SECTION.KEY=VALUE``, then the
     settings ``source`` describes (its ``config_defaults``: a simulated robot's odometry noise and pan
     policy) where the user left the default."""
-    from ..config import Config, load_config, parse_config
+    from ..config import Config, parse_config
     from ..maps import read_yaml
 
     preset = getattr(args, "preset", None)

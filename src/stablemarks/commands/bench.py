@@ -10,6 +10,12 @@ from rich.table import Table
 
 from ._common import make_console
 
+MAX_LANDMARKS = 10_000
+"""Largest landmark count of the EKF comparison (``--sizes``)."""
+
+MAX_REPEATS = 1000
+"""Most timed runs per stage (``--repeats``)."""
+
 NAME = "bench"
 HELP = "time every stage against OpenCV StereoBM, the EKF update against filterpy, and memory per frame"
 
@@ -25,14 +31,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from ..bench import ekf_vs_filterpy, memory_profile, stage_times
     from ..errors import InputError, expected
+    from ..sim.scenario import MAX_FRAMES
+    from ._common import check_out_file
 
     console = make_console()
+    # Validate everything before the first (long) measurement.
     try:
         sizes = tuple(int(v) for v in args.sizes.split(","))
     except ValueError:
         raise InputError(expected("comma-separated landmark counts", args.sizes, where="--sizes")) from None
-    if args.repeats < 1:
-        raise InputError(expected("a positive number of runs", args.repeats, where="--repeats"))
+    if not all(1 <= n <= MAX_LANDMARKS for n in sizes):
+        raise InputError(expected(f"landmark counts from 1 to {MAX_LANDMARKS}", args.sizes, where="--sizes"))
+    if not 1 <= args.repeats <= MAX_REPEATS:
+        raise InputError(expected(f"a positive number of runs, at most {MAX_REPEATS}", args.repeats,
+                                  where="--repeats"))
+    if args.memory_frames != 0 and not 4 <= args.memory_frames <= MAX_FRAMES:
+        raise InputError(expected(f"0 (skip) or a number of frames from 4 to {MAX_FRAMES}", args.memory_frames,
+                                  where="--memory-frames"))
+    if args.json:
+        check_out_file(args.json, "--json")
     console.print("single-threaded (BLAS, OpenCV, numba), median of repeated runs on a rendered 640×480 lab pair")
     stages = stage_times(args.repeats)
     t = Table(title="per-frame time, 640×480, 64 disparities")

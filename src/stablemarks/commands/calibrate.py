@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def parse_board(text: str) -> tuple[int, int]:
     """``"9x6"`` → ``(9, 6)``; at least 2 inner corners each way."""
     m = _BOARD.match(text)
-    if not m or min(int(m[1]), int(m[2])) < 2:
+    if not m or len(m[1]) > 4 or len(m[2]) > 4 or min(int(m[1]), int(m[2])) < 2 or max(int(m[1]), int(m[2])) > 100:
         raise InputError(expected("COLSxROWS inner corners, e.g. 9x6", text, where="--board"))
     return int(m[1]), int(m[2])
 
@@ -50,9 +50,16 @@ def _images(option: str, pattern: str) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    import math
+
+    from ._common import check_out_dir
+
+    check_out_dir(args.out)
     board = parse_board(args.board)
-    if not args.square > 0:
+    if not (math.isfinite(args.square) and args.square > 0):
         raise InputError(expected("a positive square size [m]", args.square, where="--square"))
+    if args.square > 10.0:
+        raise InputError(expected("a square size [m] of at most 10", args.square, where="--square"))
     left, right = _images("--left", args.left), _images("--right", args.right)
     if len(left) != len(right):
         raise InputError(f"--left matches {len(left)} files but --right matches {len(right)}; "

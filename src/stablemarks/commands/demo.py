@@ -10,11 +10,10 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 import numpy as np
 
-from ._common import make_console, out_dir_arg, parse_triplet
+from ._common import check_image_settings, check_out_dir, make_console, out_dir_arg, parse_sigmas
 
 NAME = "demo"
 HELP = "run the paper's lab experiment on the built-in scenario (Table 1, then the 1 m / 2 m motion)"
@@ -34,8 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from ..config import Config, parse_config
-    from ..maps import read_yaml
     from ..io.results import write_landmarks
+    from ..maps import read_yaml
     from ..pipeline import process_frame
     from ..sim.run import simulate_run
     from ..sim.scenario import load_scenario
@@ -44,12 +43,17 @@ def run(args) -> int:
     from .select import write_frame_figures
 
     console = make_console()
+    out = check_out_dir(args.out)
     # the paper's noise values reproduce its Table 1; --config adds to them
     config = Config.preset("paper") if args.config is None else parse_config(
         read_yaml(args.config, "configuration file"), str(args.config), base=Config.preset("paper"))
     scenario = load_scenario(args.scenario)
-    sigma = parse_triplet(args.pose_sigma, "σx, σy, σθ", "--pose-sigma")
-    out = Path(args.out)
+    sigma = parse_sigmas(args.pose_sigma, "--pose-sigma")
+    if args.seed is not None and not 0 <= args.seed < 2**63:
+        from ..errors import InputError, expected
+
+        raise InputError(expected("a non-negative seed below 2**63", args.seed, where="--seed"))
+    check_image_settings(config, scenario.camera.width, scenario.camera.height, f"scenario {args.scenario}'s camera")
     out.mkdir(parents=True, exist_ok=True)
     sim = simulate_run(scenario, args.seed)
     frame = sim.render(0)

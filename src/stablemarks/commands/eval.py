@@ -18,7 +18,16 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, expected
-from ._common import make_console, parse_triplet
+from ._common import check_image_settings, check_out_dir, make_console, parse_sigmas
+
+MAX_TRIALS = 100_000
+"""Most trials per scenario ``--trials`` takes."""
+
+MAX_JOBS = 1024
+"""Most parallel jobs ``--jobs`` takes."""
+
+MAX_SEED = 2**63 - 1
+"""Largest ``--seed``."""
 
 NAME = "eval"
 HELP = "Monte Carlo evaluation of the methods on simulated scenarios (NEES, NIS, ATE, selection, stability)"
@@ -73,6 +82,7 @@ def run(args) -> int:
         check_backend,
         check_goals,
         evaluate,
+        failures,
         format_value,
         make_trials,
         report_markdown,
@@ -81,24 +91,30 @@ def run(args) -> int:
         summary_json,
         trials_jsonl,
     )
+    from ..sim.scenario import MAX_FRAMES, load_scenario
 
     console = make_console()
     # Validate everything before running or writing anything.
+    out = check_out_dir(args.out)
     config = load_config(args.config)
-    sigma = parse_triplet(args.pose_sigma, "σx, σy, σθ", "--pose-sigma")
-    if np.any(sigma <= 0):
-        raise InputError(expected("positive standard deviations", args.pose_sigma, where="--pose-sigma"))
-    if args.seed is not None and args.seed < 0:
-        raise InputError(expected("a non-negative seed", args.seed, where="--seed"))
+    sigma = parse_sigmas(args.pose_sigma, "--pose-sigma")
+    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:
+        raise InputError(expected(f"a non-negative seed up to {MAX_SEED}", args.seed, where="--seed"))
+    if args.trials > MAX_TRIALS:
+        raise InputError(expected(f"at most {MAX_TRIALS} trials", args.trials, where="--trials"))
+    if args.frames is not None and args.frames > MAX_FRAMES:
+        raise InputError(expected(f"at most {MAX_FRAMES} frames", args.frames, where="--frames"))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(expected("a directory", str(out), where="--out"))
     check_backend(args.backend)
     trials = make_trials(args.scenarios, args.trials, methods, seed=args.seed, frames=args.frames,
                          cov0=np.diag(sigma**2), config=config)
+    for name in dict.fromkeys(args.scenarios):
+        cam = load_scenario(name).camera
+        check_image_settings(config, cam.width, cam.height, f"scenario {name}'s camera")
     if isinstance(args.jobs, int) and (args.jobs == 0 or args.jobs < -1):
         raise InputError(expected("a positive number of jobs (or -1 for all cores)", args.jobs, where="--jobs"))
+    if args.jobs > MAX_JOBS:
+        raise InputError(expected(f"at most {MAX_JOBS} jobs", args.jobs, where="--jobs"))
 
     start = time.perf_counter()
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -107,12 +123,15 @@ def run(args) -> int:
                             f"{len(args.scenarios)} scenarios)", total=len(trials))
 
         def progress(done, total, res):
+            state = "failed" if res.get("error") is not None else "done"
             bar.update(task, completed=done,
-                       description=f"{res['scenario']} trial {res['trial']} {res['method']}: done")
+                       description=f"{res['scenario']} trial {res['trial']} {res['method']}: {state}")
 
         results = evaluate(trials, jobs=args.jobs, backend=args.backend, address=args.address, progress=progress)
     wall = time.perf_counter() - start
-    summary = summarize(results)
+    failed = failures(results)
+    measured = [r for r in results if r.get("error") is None]
+    summary = summarize(measured)
     goals = check_goals(summary)
 
     out.mkdir(parents=True, exist_ok=True)
@@ -122,15 +141,15 @@ def run(args) -> int:
         (tmp / "summary.json").write_text(summary_json(summary))
         (tmp / "summary.csv").write_text(summary_csv(summary))
         figures = {}
-        if not args.no_figures:
+        if not args.no_figures and measured:
             from ..viz.report import report_figures
 
-            figures = {k: p.name for k, p in report_figures(tmp, summary, results).items()}
+            figures = {k: p.name for k, p in report_figures(tmp, summary, measured).items()}
         meta = {"scenarios": ", ".join(summary), "trials": args.trials, "methods": ", ".join(dict.fromkeys(methods)),
                 "frames": args.frames or "all", "seed": "scenario's" if args.seed is None else args.seed,
                 "start pose σ": args.pose_sigma, "jobs": args.jobs, "backend": args.backend,
                 "wall time": f"{wall:.0f} s"}
-        (tmp / "report.md").write_text(report_markdown(summary, goals, figures, meta))
+        (tmp / "report.md").write_text(report_markdown(summary, goals, figures, meta, failed))
         for f in tmp.iterdir():
             os.replace(f, out / f.name)
     finally:
@@ -158,4 +177,15 @@ def run(args) -> int:
     console.print(f"{len(results)} runs in {wall:.1f} s wall time ({args.jobs} job(s), {args.backend}); wrote "
                   f"{out}/trials.jsonl, summary.json, summary.csv, report.md"
                   + (", nees_pose.png, ate.png, reobservation.png" if figures else ""))
+    import sys
+
+    from ..errors import one_line
+
+    for r in failed:
+        print(one_line(f"warning: {r['scenario']} trial {r['trial']} {r['method']} failed: {r['error']}", 300),
+              file=sys.stderr)
+    if failed and not measured:
+        print(f"stablemarks eval: error: all {len(results)} runs failed (their messages are in "
+              f"{out}/trials.jsonl and report.md)", file=sys.stderr)
+        return 1
     return 0

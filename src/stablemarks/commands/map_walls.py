@@ -65,6 +65,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(expected("a .yaml file name", str(out), where="--out"))
     if out.exists() and out.resolve() == args.map.resolve():
         raise InputError(f"--out: {out} is the input map; choose another file name")
+    from ._common import check_out_file
+
+    check_out_file(out, "--out")
     if not args.min_length > 0:
         raise InputError(expected("a positive length [m]", args.min_length, where="--min-length"))
     if not args.max_gap >= 0:

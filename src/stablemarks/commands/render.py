@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from pathlib import Path
 
 import cv2
 from rich.console import Console
@@ -15,7 +14,7 @@ from ..errors import ImageError, InputError, expected
 from ..io.calibration import save_camera_info_pair
 from ..sim import builtin_scenarios, load_scenario, simulate_run
 from ..sim.render import renderer_for
-from ._common import out_dir_arg
+from ._common import check_out_dir, out_dir_arg
 
 NAME = "render"
 HELP = "render a simulated scenario: stereo PNGs, map, calibration and per-frame ground truth"
@@ -54,14 +53,12 @@ def parse_frames(text: str, n: int) -> list[int]:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = check_out_dir(args.out)
     scenario = load_scenario(args.scenario)
-    if args.seed is not None and args.seed < 0:
-        raise InputError(expected("a non-negative seed", args.seed, where="--seed"))
+    if args.seed is not None and not 0 <= args.seed < 2**63:
+        raise InputError(expected("a non-negative seed below 2**63", args.seed, where="--seed"))
     sim = simulate_run(scenario, args.seed)
     frames = parse_frames(args.frames, len(sim))
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(expected("a directory", str(out), where="--out"))
 
     console = Console(soft_wrap=True, highlight=False)
     renderer = renderer_for(scenario)

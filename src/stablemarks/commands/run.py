@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import re
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, expected
-from ._common import make_console, parse_triplet
+from ._common import check_image_settings, check_out_dir, make_console, parse_sigmas, parse_triplet
 
 NAME = "run"
 HELP = "run on-line landmark selection and EKF localization on a recorded sequence, bag or dataset"
@@ -80,7 +80,14 @@ def run(args) -> int:
 
         require_rerun()
     start = parse_triplet(args.pose, "x, y, theta", "--pose") if args.pose else None
-    sigma = parse_triplet(args.pose_sigma, "σx, σy, σθ", "--pose-sigma")
+    sigma = parse_sigmas(args.pose_sigma, "--pose-sigma")
+    source_dir = args.source if Path(args.source).is_dir() else None
+    if args.out is not None:
+        check_out_dir(args.out, inputs=(source_dir,))
+    if args.save_rrd:
+        from ._common import check_out_file
+
+        check_out_file(args.save_rrd, "--save-rrd")
     prior = read_yaml(args.prior_landmarks, "landmark map") if args.prior_landmarks else None
     warned = HealthWarnings()
     observers = [warned]
@@ -93,7 +100,10 @@ def run(args) -> int:
         config = load_run_config(args, source)
         for note in source.notes:
             console.print(f"note: {note}")
-        out = Path(args.out) if args.out else Path("results") / source.name
+        default = re.sub(r"[^\w.-]", "_", source.name).lstrip(".") or "run"  # a name is no path
+        out = check_out_dir(args.out if args.out else Path("results") / default, inputs=(source_dir,))
+        camera = source.camera
+        check_image_settings(config, camera.width, camera.height, f"the images of {source.name}")
         localizer = Localizer(source.world_map, source.camera, start_pose=source.initial_pose,
                               start_cov=np.diag(sigma**2), config=config, method=args.method, prior_landmarks=prior)
         rrd = None
@@ -106,7 +116,9 @@ def run(args) -> int:
             result = run_online(source, localizer, observers=observers, progress=progress)
     paths = write_run(out, result, config)
     if args.kitti:
-        paths["kitti"] = write_kitti(out / "trajectory.kitti", result.poses)
+        cam = source.camera
+        paths["kitti"] = write_kitti(out / "trajectory.kitti", result.poses, [r.pan for r in result.records],
+                                     mount=(cam.mount_x, cam.mount_y))
     if rrd is not None:
         paths["rrd"] = rrd.path
     if not args.no_figures:

@@ -6,7 +6,16 @@ import argparse
 import json
 from pathlib import Path
 
-from ._common import load_camera, make_console, out_dir_arg, pose_prior
+from ._common import (
+    check_image_settings,
+    check_out_dir,
+    load_camera,
+    load_world_map,
+    make_console,
+    out_dir_arg,
+    parse_pan,
+    pose_prior,
+)
 
 NAME = "select"
 HELP = "model and select landmarks on one stereo frame (prints Table 1, writes landmarks.csv/json, Figs 5-7)"
@@ -15,7 +24,8 @@ HELP = "model and select landmarks on one stereo frame (prints Table 1, writes l
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("left", metavar="LEFT", help="left image (rectified, or raw with --calib)")
     p.add_argument("right", metavar="RIGHT", help="right image")
-    p.add_argument("--map", required=True, metavar="MAP", help="map of walls (YAML, see README)")
+    p.add_argument("--map", required=True, metavar="MAP",
+                   help="map of walls: our map YAML (see README), a ROS map_server map.yaml or GeoJSON")
     p.add_argument("--pose", required=True, metavar="X,Y,THETA",
                    help="robot pose prior in the map: metres and radians (or e.g. 90deg)")
     p.add_argument("--pose-sigma", required=True, metavar="SX,SY,STHETA",
@@ -34,20 +44,21 @@ def run(args) -> int:
     from ..config import load_config
     from ..io.images import load_stereo_pair
     from ..io.results import write_landmarks
-    from ..maps import load_map
     from ..pipeline import process_frame
     from ._tables import landmark_table
 
     console = make_console()
+    out = check_out_dir(args.out)
     config = load_config(args.config)
-    world_map = load_map(args.map)
     X, cov_X = pose_prior(args.pose, args.pose_sigma)
+    pan = parse_pan(args.pan)
+    world_map = load_world_map(args.map)
     camera, calibration = load_camera(args.calib, args.camera, args.left)
-    if args.pan is not None:
-        camera = camera.with_pan(args.pan)
+    if pan is not None:
+        camera = camera.with_pan(pan)
     left, right = load_stereo_pair(args.left, args.right, calibration)
+    check_image_settings(config, left.shape[1], left.shape[0], f"{args.left}")
     result = process_frame(left, right, camera, world_map, X, cov_X, config)
-    out = Path(args.out)
     write_landmarks(out, result.candidates, extra={"pose": X.tolist(), "cov_pose": cov_X.tolist(),
                                                     "warnings": result.warnings})
     for w in result.warnings:

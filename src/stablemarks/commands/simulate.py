@@ -53,8 +53,13 @@ def parse_count(text: str, n: int) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.seed is not None and args.seed < 0:
-        raise InputError(expected("a non-negative seed", args.seed, where="--seed"))
+    from ..io.sequence import check_target
+    from ._common import check_out_dir
+
+    if args.seed is not None and not 0 <= args.seed < 2**63:
+        raise InputError(expected("a non-negative seed below 2**63", args.seed, where="--seed"))
+    check_out_dir(args.out, inputs=(args.scenario if Path(args.scenario).exists() else None,), replaces=args.force)
+    check_target(Path(args.out).resolve(), args.force)
     scenario = load_scenario(args.scenario)
     sim = simulate_run(scenario, args.seed)
     n = parse_count(args.frames, len(sim))

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 import numpy as np
 
-from ._common import make_console, out_dir_arg
+from ._common import check_image_settings, check_out_dir, make_console, out_dir_arg
 
 NAME = "stereo"
 HELP = "run the stereo front end on one pair: disparity.pfm/png, pairs.json, Figures 5 and 6"
@@ -34,6 +33,7 @@ def run(args) -> int:
     from ..viz.frames import disparity_image, figure5, figure6_front
 
     console = make_console()
+    out = check_out_dir(args.out)
     config = load_config(args.config)
     sad = {}
     if args.num_disparities is not None:
@@ -44,8 +44,8 @@ def run(args) -> int:
         config = config.with_overrides({"sad": sad}, "command line")
     calibration = load_calibration(args.calib) if args.calib else None
     left, right = load_stereo_pair(args.left, args.right, calibration)
+    check_image_settings(config, left.shape[1], left.shape[0], f"{args.left}")
     front = run_front_end(left, right, config)
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_pfm(out / "disparity.pfm", front.disparity.left)
     disparity_image(out / "disparity.png", front.disparity.left, config.sad.num_disparities)

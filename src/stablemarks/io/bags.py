@@ -32,8 +32,9 @@ import numpy as np
 
 from ..errors import ImageError, InputError, SequenceError
 from ..geometry import StereoCamera
-from ..maps import Map
+from ..maps import COORDINATE_LIMIT, Map
 from .calibration import StereoCalibration
+from .images import MAX_IMAGE_SIDE, check_image_size, imdecode_quietly
 from .recorded import (
     BAG_SUFFIXES,
     SYNC_TOLERANCE,
@@ -94,10 +95,11 @@ def decode_image(msg, msgtype: str, where: str) -> np.ndarray:
     colour channels in OpenCV's BGR(A) order. :class:`ImageError` naming ``where`` for what cannot be read."""
     if msgtype.endswith("CompressedImage"):
         buf = np.frombuffer(memoryview(msg.data), dtype=np.uint8)
-        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
+        img, reason = imdecode_quietly(buf, cv2.IMREAD_UNCHANGED) if buf.size else (None, "no data")
         if img is None:
-            raise ImageError(f"{where}: cannot decode the compressed image (format {msg.format!r})")
-        return img
+            why = f": {reason}" if reason else ""
+            raise ImageError(f"{where}: cannot decode the compressed image (format {msg.format!r}{why})")
+        return check_image_size(img, where)
     enc = str(msg.encoding)
     if enc not in _ENCODINGS:
         raise ImageError(f"{where}: unsupported image encoding {enc!r} (expected one of {', '.join(_ENCODINGS)})")
@@ -105,6 +107,8 @@ def decode_image(msg, msgtype: str, where: str) -> np.ndarray:
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     row = w * channels * np.dtype(dtype).itemsize
     data = np.frombuffer(memoryview(msg.data), dtype=np.uint8)
+    if not (0 < h <= MAX_IMAGE_SIDE and 0 < w <= MAX_IMAGE_SIDE):
+        raise ImageError(f"{where}: a {w}×{h} image; expected 1 to {MAX_IMAGE_SIDE} px each way")
     if h <= 0 or w <= 0 or step < row or data.size < h * step:
         raise ImageError(f"{where}: a {w}×{h} {enc} image needs rows of at least {row} bytes and {h} rows, got "
                          f"step {step} and {data.size} bytes")
@@ -228,7 +232,9 @@ class BagSource(RecordedSource):
             raise SequenceError(f"{self.path}: {odom_topic}: no messages")
         t_odom = np.array([o[0] for o in odom], dtype=np.int64)
         check_stamps(t_odom, f"{self.path}: {odom_topic}")
-        out.append((t_odom, np.array([o[1:] for o in odom], dtype=float)))
+        poses = np.array([o[1:] for o in odom], dtype=float)
+        _check_values(poses, t_odom, f"{self.path}: {odom_topic}", "pose")
+        out.append((t_odom, poses))
         if pan_topic is None:
             out.append(None)
             return out
@@ -238,7 +244,9 @@ class BagSource(RecordedSource):
                                 + (f" (no joint {pan_joint!r}; the joints are {known})" if known else ""))
         t_pan = np.array([p[0] for p in pan], dtype=np.int64)
         check_stamps(t_pan, f"{self.path}: {pan_topic}")
-        out.append((t_pan, np.array([p[1] for p in pan])))
+        values = np.array([p[1] for p in pan], dtype=float)
+        _check_values(values, t_pan, f"{self.path}: {pan_topic}", "pan")
+        out.append((t_pan, values))
         return out
 
     def _check_topic(self, topics: dict, option: str, topic: str | None, types: Sequence[str]) -> None:
@@ -280,6 +288,15 @@ class BagSource(RecordedSource):
         if self._reader is not None:
             self._reader.close()
             self._reader = None
+
+
+def _check_values(values: np.ndarray, stamps: np.ndarray, where: str, what: str) -> None:
+    """Every value finite and within ±:data:`~stablemarks.maps.COORDINATE_LIMIT` (metres, radians)."""
+    bad = ~np.all(np.isfinite(values) & (np.abs(values) <= COORDINATE_LIMIT), axis=tuple(range(1, values.ndim)))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise SequenceError(f"{where}: message {i} (stamped {stamps[i] / 1e9:.9f} s): expected a finite {what} "
+                            f"within ±{COORDINATE_LIMIT:g}, got {values[i].tolist()}")
 
 
 def _span(t: np.ndarray) -> str:

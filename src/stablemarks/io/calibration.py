@@ -48,7 +48,7 @@ import yaml
 from ..errors import CalibrationError, ConfigError, ImageError, InputError, expected
 from ..geometry import StereoCamera
 from ..maps import _number, read_yaml
-from .images import load_image_gray, to_gray8
+from .images import MAX_IMAGE_SIDE, load_image_gray, native_stderr, to_gray8
 
 ROS_FILES = ("left.yaml", "right.yaml")
 """File names of a ROS camera_info pair inside a calibration directory."""
@@ -92,7 +92,7 @@ def load_mount(path: str | Path) -> Mount:
     src = str(path)
     data = read_yaml(path, "mount file")
     if isinstance(data, dict) and "mount" in data:
-        extra = sorted(set(data) - {"mount"})
+        extra = sorted(set(data) - {"mount"}, key=str)
         if extra:
             raise ConfigError(f"{src}: unknown field {extra[0]!r} next to 'mount'")
         data, prefix = data["mount"], "mount."
@@ -102,7 +102,7 @@ def load_mount(path: str | Path) -> Mount:
         fields = {k: k for k in ("mount_x", "mount_y", "mount_height", "pan_deg")}
     if not isinstance(data, dict):
         raise ConfigError(expected(f"a mapping with {', '.join(fields)}", data, where=f"{src}: {prefix or 'mount'}"))
-    unknown = sorted(set(data) - set(fields))
+    unknown = sorted(set(data) - set(fields), key=str)  # keys of any type: `~:` is None
     if unknown:
         raise ConfigError(f"{src}: unknown field {prefix}{unknown[0]} (known: {', '.join(fields)})")
     height = next(k for k, v in fields.items() if v == "mount_height")
@@ -346,6 +346,8 @@ def _positive_int(data: dict, key: str, src: str) -> int:
     v = data[key]
     if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
         raise ConfigError(expected("a positive integer number of pixels", v, where=f"{src}: {key}"))
+    if v > MAX_IMAGE_SIDE:
+        raise ConfigError(expected(f"at most {MAX_IMAGE_SIDE} pixels", v, where=f"{src}: {key}"))
     return v
 
 
@@ -391,7 +393,7 @@ def _read_camera_info(path: Path) -> dict:
     if not isinstance(name, str):
         raise ConfigError(expected("a string", name, where=f"{src}: camera_name"))
     model = data.get("distortion_model")
-    if model not in _DISTORTION_MODELS:
+    if not isinstance(model, str) or model not in _DISTORTION_MODELS:
         raise ConfigError(expected(f"distortion_model {' or '.join(_DISTORTION_MODELS)}", model,
                                    where=f"{src}: distortion_model"))
     K = _ros_matrix(data, "camera_matrix", 3, 3, src)
@@ -472,8 +474,10 @@ def _fs_image_size(fs: cv2.FileStorage, src: str) -> tuple[int, int]:
         node = fs.getNode(key)
         values = [node.at(i).real() for i in range(node.size())] if node.isSeq() \
             else _fs_matrix(fs, key, (2,), src).tolist()
-    if len(values) != 2 or not all(v is not None and v > 0 and float(v).is_integer() for v in values):
-        raise ConfigError(expected("a positive integer width and height [px]", values, where=f"{src}: {key}"))
+    if len(values) != 2 or not all(v is not None and 0 < v <= MAX_IMAGE_SIDE and float(v).is_integer()
+                                   for v in values):
+        raise ConfigError(expected(f"a positive integer width and height [px], at most {MAX_IMAGE_SIDE}", values,
+                                   where=f"{src}: {key}"))
     return int(values[0]), int(values[1])
 
 
@@ -490,7 +494,8 @@ def load_opencv_calibration(path: str | Path) -> StereoCalibration:
     if not path.is_file():
         raise ConfigError(f"{src}: no such calibration file")
     try:
-        fs = cv2.FileStorage(src, cv2.FILE_STORAGE_READ)
+        with native_stderr():
+            fs = cv2.FileStorage(src, cv2.FILE_STORAGE_READ)
     except (cv2.error, SystemError) as exc:
         reason = str(exc.__cause__ or exc).strip().splitlines()[-1]
         hint = " (a ROS camera_info file: pass the directory holding left.yaml and right.yaml)" \

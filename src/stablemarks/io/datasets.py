@@ -42,12 +42,12 @@ import math
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..errors import ConfigError, SequenceError, expected
 from ..geometry import wrap_angle
+from ..maps import COORDINATE_LIMIT, INT64_MAX, STAMP_LIMIT, parse_yaml
 from .calibration import Mount, StereoCalibration, _stereo_rectify, load_calibration
-from .images import load_image_gray
+from .images import MAX_IMAGE_SIDE, load_image_gray
 from .recorded import (
     SYNC_TOLERANCE,
     RecordedSource,
@@ -74,14 +74,28 @@ def _odometry_file(odometry, folder: Path, what: str) -> Path:
                         "folder or pass `odometry` (an odometry CSV)")
 
 
-def _numbers(text: str, where: str) -> list[float]:
+def _numbers(text: str, where: str, limit: float = COORDINATE_LIMIT) -> list[float]:
+    """The numbers of a line, each finite and of magnitude at most ``limit``."""
     try:
         values = [float(v) for v in text.split()]
     except ValueError:
         raise SequenceError(expected("numbers separated by spaces", text.strip(), where=where)) from None
     if not all(math.isfinite(v) for v in values):
         raise SequenceError(expected("finite numbers", text.strip(), where=where))
+    if any(abs(v) > limit for v in values):
+        raise SequenceError(expected(f"numbers within ±{limit:g}", text.strip(), where=where))
     return values
+
+
+def _nanoseconds(text: str, where: str) -> int:
+    """An integer time stamp [ns] that fits int64."""
+    try:
+        value = int(text) if len(text.strip()) <= 20 else None
+    except ValueError:
+        value = None
+    if value is None or abs(value) > INT64_MAX:
+        raise SequenceError(expected("an integer timestamp [ns]", text, where=where))
+    return value
 
 
 class FolderSource(RecordedSource):
@@ -174,7 +188,7 @@ def open_kitti(path: str | Path, *, map=None, mount=None, odometry=None, toleran
     stamps = []
     for number, line in enumerate(times_path.read_text().splitlines(), start=1):
         if line.strip():
-            values = _numbers(line, f"{times_path} line {number}")
+            values = _numbers(line, f"{times_path} line {number}", STAMP_LIMIT)
             if len(values) != 1:
                 raise SequenceError(expected("one stamp [s]", line.strip(), where=f"{times_path} line {number}"))
             stamps.append(values[0])
@@ -211,10 +225,7 @@ def _read_sensor_yaml(path: Path) -> dict:
     except FileNotFoundError:
         raise SequenceError(f"{path}: no such sensor file") from None
     text = "\n".join("" if line.startswith("%YAML") else line for line in text.splitlines())
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    data = parse_yaml(text, str(path))
     if not isinstance(data, dict):
         raise ConfigError(expected("a mapping", type(data).__name__, where=str(path)))
     return data
@@ -246,7 +257,7 @@ def read_euroc_camera(cam_dir: str | Path) -> tuple[tuple[int, int], np.ndarray,
     if dist not in ("radial-tangential", "radtan", "plumb_bob"):
         raise ConfigError(expected("distortion_model radial-tangential", dist, where=f"{path}: distortion_model"))
     w, h = field("resolution", 2, "[width, height] px")
-    if not (w > 0 and h > 0 and w.is_integer() and h.is_integer()):
+    if not (0 < w <= MAX_IMAGE_SIDE and 0 < h <= MAX_IMAGE_SIDE and w.is_integer() and h.is_integer()):
         raise ConfigError(expected("a positive integer [width, height]", d.get("resolution"),
                                    where=f"{path}: resolution"))
     fu, fv, cu, cv = field("intrinsics", 4, "[fu, fv, cu, cv] px")
@@ -287,10 +298,7 @@ def read_euroc_images(cam_dir: str | Path) -> tuple[np.ndarray, list[Path]]:
             where = f"{path} line {number}"
             if len(row) != 2:
                 raise SequenceError(expected("2 fields: timestamp [ns],filename", ",".join(row), where=where))
-            try:
-                stamps.append(int(row[0]))
-            except ValueError:
-                raise SequenceError(expected("an integer timestamp [ns]", row[0], where=where)) from None
+            stamps.append(_nanoseconds(row[0], where))
             image = cam_dir / "data" / row[1].strip()
             if not image.is_file():
                 raise SequenceError(f"{where}: {image}: no such image")
@@ -314,10 +322,7 @@ def euroc_groundtruth(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
                 raise SequenceError(expected("at least 8 fields: t, px, py, pz, qw, qx, qy, qz", len(row),
                                              where=f"{path} line {number}"))
             where = f"{path} line {number}"
-            try:
-                stamps.append(int(row[0]))
-            except ValueError:
-                raise SequenceError(expected("an integer timestamp [ns]", row[0], where=where)) from None
+            stamps.append(_nanoseconds(row[0], where))
             rows.append(_numbers(" ".join(row[1:8]), where))
     if not rows:
         raise SequenceError(f"{path}: no poses")

@@ -13,6 +13,9 @@ import numpy as np
 
 from ..errors import ImageError, InputError, expected
 
+MAX_PFM_SIDE = 8192
+"""Largest width and height of a PFM image read [px] (the camera images' limit)."""
+
 
 def write_pfm(path: str | Path, array: np.ndarray) -> Path:
     """Write a 2-D array as a little-endian grayscale PFM (NaN → +inf)."""
@@ -49,10 +52,11 @@ def read_pfm(path: str | Path) -> np.ndarray:
         raise ImageError(f"{path}: colour PFM ('PF'); expected a grayscale disparity map ('Pf')")
     try:
         w, h, scale = int(parts[1]), int(parts[2]), float(parts[3])
-    except ValueError:
+    except (ValueError, OverflowError):
         raise ImageError(f"{path}: PFM header: expected width, height and scale numbers") from None
-    if w <= 0 or h <= 0 or scale == 0:
-        raise ImageError(f"{path}: PFM header: expected positive size and a non-zero scale, got {w}x{h}, {scale}")
+    if not (0 < w <= MAX_PFM_SIDE and 0 < h <= MAX_PFM_SIDE) or scale == 0 or scale != scale:
+        raise ImageError(f"{path}: PFM header: expected a size of 1 to {MAX_PFM_SIDE} px each way and a non-zero "
+                         f"scale, got {w}x{h}, {scale}")
     n = w * h * 4
     if len(data) - pos < n:
         raise ImageError(f"{path}: PFM data: expected {n} bytes for {w}x{h} floats, got {len(data) - pos}")

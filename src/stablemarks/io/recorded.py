@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ImageError, InputError, SequenceError, expected
+from ..errors import ConfigError, ImageError, InputError, SequenceError, expected
 from ..frames import Frame
 from ..geometry import StereoCamera
-from ..maps import Map
+from ..maps import COORDINATE_LIMIT, STAMP_LIMIT, Map
 from .calibration import Mount, StereoCalibration, load_calibration, load_mount
 from .images import to_gray8
 
@@ -117,22 +117,28 @@ def read_odometry_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     if not path.is_file():
         raise SequenceError(f"{path}: no such odometry file (columns {','.join(_ODOMETRY_COLUMNS)})")
     rows = _read_csv(path, "odometry file", _ODOMETRY_COLUMNS)
-    values = np.array([[_number(row[c], f"{path} line {line}: {c}") for c in _ODOMETRY_COLUMNS]
-                       for line, row in rows])
+    values = np.array([[_number(row[c], f"{path} line {line}: {c}", STAMP_LIMIT if c == "stamp" else COORDINATE_LIMIT)
+                        for c in _ODOMETRY_COLUMNS] for line, row in rows])
     check_stamps(values[:, 0], str(path))
     return values[:, 0], values[:, 1:]
 
 
 # ------------------------------------------------------------------ inputs from the command line
 def load_world_map(path: str | Path | None, what: str) -> Map:
-    """The map of walls from ``path`` (any map file :func:`stablemarks.io.mapfiles.load_any_map` reads);
-    ``what`` names the recording in the error when no map is given."""
+    """The map of walls from ``path`` (any map file :func:`stablemarks.io.mapfiles.load_any_map` reads), with
+    at least one wall; ``what`` names the recording in the error when no map is given."""
     if path is None:
         raise InputError(f"{what} carries no map of walls: pass `map` (our map YAML, a ROS map_server "
                          "map.yaml or GeoJSON walls)")
     from .mapfiles import load_any_map
 
-    return load_any_map(path)
+    try:
+        world_map = load_any_map(path)
+    except RecursionError:  # a JSON file nested thousands of levels deep
+        raise ConfigError(f"{path}: nested too deeply to be a map file") from None
+    if not len(world_map):
+        raise InputError(f"{path}: no walls: the map must hold at least one wall")
+    return world_map
 
 
 def load_mount_near(mount: str | Path | None, calib: str | Path | None, default: Mount | None = None,

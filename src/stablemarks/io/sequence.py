@@ -6,8 +6,9 @@ before anything runs and raises :class:`~stablemarks.errors.SequenceError` namin
 that is missing or wrong; :func:`write_sequence` builds the folder under a temporary name beside the
 target and renames it at the end, so a failure never leaves a half-written folder.
 
-Folder layout (every path is given in ``sequence.yaml``, relative to the folder; these are the names
-``simulate`` uses)::
+Folder layout (every path is given in ``sequence.yaml``, relative to the folder and inside it: an absolute
+path or one that leads out with ``..`` is an error, a symbolic link inside the folder may point anywhere;
+these are the names ``simulate`` uses)::
 
     DIR/
       sequence.yaml        # what is where (below)
@@ -45,7 +46,7 @@ Folder layout (every path is given in ``sequence.yaml``, relative to the folder;
 
 - ``index``: frame number, an integer, strictly increasing (gaps allowed).
 - ``stamp``: time of the stereo pair [s], strictly increasing.
-- ``left``, ``right``: image paths relative to the folder.
+- ``left``, ``right``: image paths relative to the folder, inside it.
 - ``pan``: optional column, the head's pan relative to the robot's heading [rad], positive to the left;
   without it every frame has the mount's ``pan_deg``.
 
@@ -93,7 +94,8 @@ import yaml
 from ..errors import ImageError, InputError, SequenceError, expected
 from ..frames import Frame
 from ..geometry import SE2, StereoCamera, wrap_angle
-from ..maps import Map, read_yaml
+from ..maps import COORDINATE_LIMIT, INT64_MAX, STAMP_LIMIT, Map, read_yaml
+from ..maps import _number as map_number
 from .calibration import (
     ROS_FILES,
     StereoCalibration,
@@ -213,14 +215,26 @@ def _as_sequence_error() -> Iterator[None]:
         raise SequenceError(str(exc)) from None
 
 
-def _number(text: str, where: str) -> float:
+def _number(text: str, where: str, limit: float = COORDINATE_LIMIT) -> float:
+    """A CSV field as a finite number of magnitude at most ``limit``."""
     try:
         value = float(text)
     except ValueError:
         raise SequenceError(expected("a number", text, where=where)) from None
     if not math.isfinite(value):
         raise SequenceError(expected("a finite number", text, where=where))
+    if abs(value) > limit:
+        raise SequenceError(expected(f"a number within ±{limit:g}", text, where=where))
     return value
+
+
+def _inside(root: Path, value: str, where: str) -> Path:
+    """``root / value`` for a path ``value`` relative to the sequence folder that stays inside it (no absolute
+    path, no ``..`` leading out; symbolic links inside the folder are followed wherever they point)."""
+    rel = Path(value)
+    if rel.is_absolute() or rel.drive or os.path.normpath(value).split(os.sep)[0] == os.pardir:
+        raise SequenceError(expected("a path inside the sequence folder, relative to it", value, where=where))
+    return root / rel
 
 
 def _read_csv(path: Path, what: str, required: tuple[str, ...], optional: tuple[str, ...] = ()):
@@ -267,7 +281,7 @@ def _entry(meta: dict, key: str, root: Path, source: Path, required: bool = True
         return None
     if not isinstance(value, str) or not value.strip():
         raise SequenceError(expected("a path relative to the sequence folder", value, where=f"{source}: {key}"))
-    return root / value
+    return _inside(root, value, f"{source}: {key}")
 
 
 def _initial_pose(value, source: Path) -> SE2 | None:
@@ -278,10 +292,8 @@ def _initial_pose(value, source: Path) -> SE2 | None:
         raise SequenceError(expected("a mapping {x: m, y: m, theta_deg: deg}", value, where=where))
     numbers = {}
     for key in ("x", "y", "theta_deg"):
-        v = value.get(key, 0.0)
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise SequenceError(expected("a finite number", v, where=f"{where}.{key}"))
-        numbers[key] = float(v)
+        with _as_sequence_error():
+            numbers[key] = map_number(value.get(key, 0.0), f"{where}.{key}")
     return SE2(numbers["x"], numbers["y"], float(wrap_angle(math.radians(numbers["theta_deg"]))))
 
 
@@ -360,15 +372,18 @@ def load_sequence(path: str | Path) -> Sequence:
     for line, row in rows:
         where = f"{frames_path} line {line}"
         try:
-            indices.append(int(row["index"]))
+            index = int(row["index"]) if len(row["index"]) <= 20 else None
         except ValueError:
-            raise SequenceError(expected("an integer", row["index"], where=f"{where}: index")) from None
-        stamps.append(_number(row["stamp"], f"{where}: stamp"))
+            index = None
+        if index is None or abs(index) > INT64_MAX:
+            raise SequenceError(expected("an integer", row["index"], where=f"{where}: index"))
+        indices.append(index)
+        stamps.append(_number(row["stamp"], f"{where}: stamp", STAMP_LIMIT))
         pans.append(_number(row["pan"], f"{where}: pan") if "pan" in row else mount.pan)
         for side, paths in (("left", left), ("right", right)):
             if not row[side]:
                 raise SequenceError(f"{where}: {side}: expected an image path, got an empty field")
-            image = root / row[side]
+            image = _inside(root, row[side], f"{where}: {side}")
             if not image.is_file():
                 raise SequenceError(f"{where}: {side} image {image}: no such file")
             paths.append(image)
@@ -385,7 +400,7 @@ def load_sequence(path: str | Path) -> Sequence:
     odometry = np.zeros((len(rows), 3))
     for k, (line, row) in enumerate(odom_rows):
         where = f"{odom_path} line {line}"
-        t = _number(row["stamp"], f"{where}: stamp")
+        t = _number(row["stamp"], f"{where}: stamp", STAMP_LIMIT)
         if abs(t - stamps[k]) > STAMP_TOLERANCE:
             raise SequenceError(f"{where}: stamp: expected {float(stamps[k])!r}, the stamp of frame {indices[k]} "
                                 f"({frames_path} line {lines[k]}), got {t!r}")
@@ -435,6 +450,10 @@ def _check_target(out: Path, force: bool) -> None:
     if not (out / SEQUENCE_FILE).is_file():
         raise InputError(f"{out}: not a sequence folder (no {SEQUENCE_FILE}); refusing to replace it, even "
                          "with `force`")
+
+
+check_target = _check_target
+"""Check a target folder of :func:`write_sequence` before any work (what ``_check_target`` refuses)."""
 
 
 def _install(tmp: Path, out: Path, force: bool) -> None:

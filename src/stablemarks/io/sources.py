@@ -28,6 +28,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError, SequenceError, expected
+from ..maps import COORDINATE_LIMIT
 from .bags import open_bag
 from .datasets import open_euroc, open_kitti
 from .recorded import (  # noqa: F401  (re-exported: what bags and datasets share)
@@ -45,6 +46,22 @@ from .recorded import (  # noqa: F401  (re-exported: what bags and datasets shar
     yaw_of_quaternion,
 )
 from .sequence import SEQUENCE_FILE, SequenceSource, load_sequence
+
+MAX_TOLERANCE = 60.0
+"""Largest stamp tolerance [s] :func:`open_sequence` takes (pairing and odometry)."""
+
+
+def _start_pose(pose):
+    """A start pose (3,): finite, within ±:data:`~stablemarks.maps.COORDINATE_LIMIT` (metres and radians)."""
+    import numpy as np
+
+    try:
+        X = np.asarray(pose, dtype=float).reshape(3)
+    except (TypeError, ValueError):
+        raise InputError(expected("a pose (x, y, theta)", pose, where="start_pose")) from None
+    if not (np.all(np.isfinite(X)) and np.all(np.abs(X) <= COORDINATE_LIMIT)):
+        raise InputError(expected(f"a finite pose within ±{COORDINATE_LIMIT:g}", X.tolist(), where="start_pose"))
+    return X
 
 
 # ------------------------------------------------------------------ dispatch
@@ -107,6 +124,10 @@ def open_sequence(
         raise SequenceError(f"{p}: no such file or folder")
     if not (math.isfinite(tolerance) and tolerance >= 0):
         raise InputError(expected("a non-negative time [s]", tolerance, where="tolerance"))
+    if tolerance > MAX_TOLERANCE:
+        raise InputError(expected(f"a time of at most {MAX_TOLERANCE:g} s", tolerance, where="tolerance"))
+    if start_pose is not None:
+        start_pose = _start_pose(start_pose)
     kind = _kind(p)
     given = {"left_topic": left_topic, "right_topic": right_topic, "odom_topic": odom_topic,
              "pan_topic": pan_topic, "pan_joint": pan_joint, "calib": calib, "map": map,

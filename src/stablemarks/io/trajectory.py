@@ -66,7 +66,8 @@ def write_tum(path: str | Path, stamps, poses) -> Path:
     """Write planar poses (n, 3) ``(x [m], y [m], theta [rad])`` at ``stamps`` (n,) [s] as a TUM file.
 
     Lines ``"stamp x y 0 0 0 sin(θ/2) cos(θ/2)"`` after a :data:`TUM_HEADER` comment; stamps keep 9 decimals
-    (ns), positions 9 (nm), quaternion components 12 (a loop's poses read back to 1e-9). Written under a temporary name and renamed.
+    (ns), positions 9 (nm), quaternion components 12 (a loop's poses read back to 1e-9). Written under a
+    temporary name and renamed.
     """
     stamps, poses = _check_poses(stamps, poses)
     half = 0.5 * poses[:, 2]

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..errors import InputError, expected
 from ..geometry import SE2, StereoCamera
-from .scenario import Feature, Scenario
+from .scenario import MAX_IMAGE_SIDE, Feature, Scenario
 from .truth import FrameTruth, frame_truth
 from .world import BACKGROUND, CEILING, FLOOR, World
 
@@ -66,6 +66,12 @@ class Renderer:
         if isinstance(supersample, bool) or not isinstance(supersample, int) or supersample < 1:
             raise InputError(expected("a positive integer number of rays per column", supersample,
                                       where="supersample"))
+        cam = scenario.camera
+        if not (1 <= cam.width <= MAX_IMAGE_SIDE and 1 <= cam.height <= MAX_IMAGE_SIDE):
+            raise InputError(expected(f"an image of at most {MAX_IMAGE_SIDE}×{MAX_IMAGE_SIDE} px",
+                                      f"{cam.width}×{cam.height} px", where="camera"))
+        if supersample > 64:
+            raise InputError(expected("at most 64 rays per column", supersample, where="supersample"))
         self.scenario = scenario
         self.world = World.from_scenario(scenario)
         self.supersample = int(supersample)

@@ -99,13 +99,20 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, expected
-from ..geometry import SE2, StereoCamera
-from ..maps import Map, ReferencePlane, parse_plane, read_yaml
+from ..geometry import SE2, StereoCamera, wrap_angle
+from ..maps import COORDINATE_LIMIT, Map, ReferencePlane, parse_plane, read_yaml
 from ..motion import Forward, GoTo, OdometryNoise, PathStep, Turn
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 _ID = re.compile(r"^[A-Za-z0-9_\-]+$")
 _REQUIRED = object()
+
+MAX_IMAGE_SIDE = 4096
+"""Largest width and height of a scenario's camera [px] (a 4096×4096 stereo pair renders in about 10 s)."""
+
+MAX_FRAMES = 100_000
+"""Most stereo frames a scenario's path may generate (``robot.path`` cut by ``frame_spacing`` and
+``frame_turn_deg``)."""
 
 
 # --------------------------------------------------------------- the model
@@ -304,6 +311,14 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return parse_scenario(read_yaml(path, "scenario file"), str(path), default_name=path.stem)
 
 
+def _finite(v: int | float) -> bool:
+    """Whether a number is finite (an integer too large for a float is not)."""
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
+
+
 class _Node:
     """A mapping of a scenario file being read: typed getters whose errors name the file and field path."""
 
@@ -332,7 +347,9 @@ class _Node:
     def number(self, key: str, default=_REQUIRED, *, lo: float | None = None, hi: float | None = None,
                positive: bool = False) -> float:
         v = self.raw(key, default)
-        ok = not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
+        ok = not isinstance(v, bool) and isinstance(v, int | float) and _finite(v)
+        if ok and abs(v) > COORDINATE_LIMIT:
+            raise ConfigError(expected(f"a number within ±{COORDINATE_LIMIT:g}", v, where=self.where(key)))
         if positive:
             what = "a positive number"
             ok = ok and v > 0
@@ -348,18 +365,22 @@ class _Node:
             raise ConfigError(expected(what, v, where=self.where(key)))
         return float(v)
 
-    def integer(self, key: str, default=_REQUIRED, *, lo: int = 0) -> int:
+    def integer(self, key: str, default=_REQUIRED, *, lo: int = 0, hi: int | None = None) -> int:
         v = self.raw(key, default)
         if isinstance(v, bool) or not isinstance(v, int) or v < lo:
             raise ConfigError(expected(f"an integer >= {lo}", v, where=self.where(key)))
+        if hi is not None and v > hi:
+            raise ConfigError(expected(f"an integer <= {hi}", v, where=self.where(key)))
         return int(v)
 
     def numbers(self, key: str, n: int, default=_REQUIRED, what: str = "") -> tuple[float, ...]:
         v = self.raw(key, default)
         bad = not isinstance(v, list | tuple) or len(v) != n or any(
-            isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x) for x in v)
+            isinstance(x, bool) or not isinstance(x, int | float) or not _finite(x) for x in v)
         if bad:
             raise ConfigError(expected(what or f"a list of {n} numbers", v, where=self.where(key)))
+        if any(abs(x) > COORDINATE_LIMIT for x in v):
+            raise ConfigError(expected(f"numbers within ±{COORDINATE_LIMIT:g}", v, where=self.where(key)))
         return tuple(float(x) for x in v)
 
     def flag(self, key: str, default=_REQUIRED) -> bool:
@@ -427,7 +448,7 @@ def parse_scenario(data: object, source: str = "scenario", *, default_name: str 
         raise ConfigError(f"{top.where('features')}: duplicate id {dup[0]!r}")
     return Scenario(
         name=name,
-        seed=top.integer("seed", 0),
+        seed=top.integer("seed", 0, hi=2**63 - 1),
         camera=camera,
         image_noise=image_noise,
         pan_limits=pan_limits,
@@ -445,8 +466,8 @@ def parse_scenario(data: object, source: str = "scenario", *, default_name: str 
 
 def _camera(n: _Node) -> tuple[StereoCamera, float, tuple[float, float]]:
     d = StereoCamera()
-    width = n.integer("width", d.width, lo=1)
-    height = n.integer("height", d.height, lo=1)
+    width = n.integer("width", d.width, lo=1, hi=MAX_IMAGE_SIDE)
+    height = n.integer("height", d.height, lo=1, hi=MAX_IMAGE_SIDE)
     camera = StereoCamera(
         width=width, height=height, f=n.number("f", d.f, positive=True),
         cu=n.number("cu", (width - 1) / 2), cv=n.number("cv", (height - 1) / 2),
@@ -579,7 +600,7 @@ def _robot(n: _Node, pan_limits: tuple[float, float]) -> RobotPlan:
     if not pan_limits[0] <= angle <= pan_limits[1]:
         raise ConfigError(expected("an angle inside camera.pan_limits_deg", math.degrees(angle),
                                    where=pan.where("angle_deg")))
-    return RobotPlan(
+    plan = RobotPlan(
         start=SE2(start.number("x", 0.0), start.number("y", 0.0), math.radians(start.number("theta_deg", 0.0))),
         path=tuple(_step(s) for s in n.items("path", ("forward", "turn_deg", "to"))),
         frame_spacing=n.number("frame_spacing", 0.1, positive=True),
@@ -588,6 +609,41 @@ def _robot(n: _Node, pan_limits: tuple[float, float]) -> RobotPlan:
                                   ("trans_per_m", "rot_per_m_deg", "rot_per_rad", "trans_per_rad")}),
         pan=PanPolicy(pan.text("policy", "fixed", choices=("fixed", "look_at_free_edges")), angle),
     )
+    frames = count_frames(plan)
+    if frames > MAX_FRAMES:
+        raise ConfigError(f"{n.where('path')}: the path makes {frames:.0f} stereo frames, more than {MAX_FRAMES} "
+                          "(a shorter path, or a larger frame_spacing or frame_turn_deg)")
+    return plan
+
+
+def count_frames(plan: RobotPlan) -> float:
+    """How many stereo frames :func:`~stablemarks.motion.plan_path` takes along ``plan`` (start included),
+    counted without building the poses (the count may be huge)."""
+    x, y, theta = plan.start.x, plan.start.y, plan.start.theta
+    count = 1.0
+
+    def parts(amount: float, spacing: float) -> float:
+        return max(1.0, math.ceil(amount / spacing - 1e-9))
+
+    for step in plan.path:
+        if isinstance(step, Turn):
+            count += parts(abs(step.angle), plan.frame_turn)
+            theta += step.angle
+        elif isinstance(step, Forward):
+            count += parts(step.distance, plan.frame_spacing)
+            x, y = x + step.distance * math.cos(theta), y + step.distance * math.sin(theta)
+        else:
+            dx, dy = step.point[0] - x, step.point[1] - y
+            dist = math.hypot(dx, dy)
+            if dist > 1e-9:
+                angle = float(wrap_angle(math.atan2(dy, dx) - theta))
+                if abs(angle) > 1e-9:
+                    count += parts(abs(angle), plan.frame_turn)
+                count += parts(dist, plan.frame_spacing)
+                x, y, theta = step.point[0], step.point[1], theta + angle
+        if count > MAX_FRAMES:
+            break
+    return count
 
 
 def _step(n: _Node) -> PathStep:

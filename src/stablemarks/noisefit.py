@@ -8,7 +8,8 @@ estimates, frame by frame at the *true* pose:
     reference plane is triangulated from the true pose; its offset from the *mapped* wall along the wall's
     normal, divided by its σ for ``σ_img = 1 px`` (first order, :meth:`StereoCamera.triangulate`), is a
     sample of ``N(0, σ_img²)``. The estimate is their RMS after gross outliers (lines of clutter standing
-    in front of a wall) are clipped (:func:`clipped_rms`).
+    in front of a wall) are clipped (:func:`clipped_rms`). This per-frame line noise is a lower bound for the
+    filter: ``calibrate-noise`` then writes the smallest multiple of it with which the filter is consistent.
 ``noise.boundary_px``, ``noise.free_boundary_px``
     the σ of a boundary's column [px], when a segment marks the edge (snapped, Sec 3.2) and when the planar
     region's border itself does: each boundary found is compared with the column where the true pose projects

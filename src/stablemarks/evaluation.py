@@ -125,6 +125,15 @@ class Trial:
     frames: int | None = None
     cov0: np.ndarray = field(default_factory=lambda: DEFAULT_COV0.copy())
     config: Config = field(default_factory=Config)
+    pan_policy: str | None = None
+    """The pan policy the method's head follows (``pan.policy``); None: the scenario's."""
+    tag: str = ""
+    """Appended to the method's name in the results (``stablemarks@information``), to tell policies apart."""
+
+    @property
+    def label(self) -> str:
+        """The method's name in the results."""
+        return self.method + self.tag
 
 
 def trial_seeds(base: int, n: int) -> list[int]:
@@ -154,12 +163,20 @@ def check_methods(methods: Iterable[str]) -> tuple[str, ...]:
 
 def make_trials(scenarios: Sequence[str], n_trials: int, methods: Sequence[str] | None = None, *,
                 seed: int | None = None, frames: int | None = None, cov0=None,
-                config: Config = Config()) -> list[Trial]:
-    """All tasks of an evaluation, scenario by scenario, trial by trial, method by method.
+                config: Config = Config(), pan_policies: Sequence[str] | None = None) -> list[Trial]:
+    """All tasks of an evaluation, scenario by scenario, trial by trial, method by method (and pan policy).
 
     Loads (validates) every scenario first. ``methods``: default :func:`available_methods`. ``seed``: base of
-    :func:`trial_seeds` (default: each scenario's own ``seed``).
+    :func:`trial_seeds` (default: each scenario's own ``seed``). ``pan_policies``: run every method with each
+    of these pan policies (default: the scenario's); with more than one, the results name the method
+    ``method@policy``.
     """
+    from .viewing import PAN_POLICIES
+
+    policies = list(pan_policies or [None])
+    for p in policies:
+        if p is not None and p not in PAN_POLICIES:
+            raise InputError(expected(f"one of {', '.join(PAN_POLICIES)}", p, where="pan_policies"))
     if isinstance(n_trials, bool) or not isinstance(n_trials, int) or n_trials < 1:
         raise InputError(expected("a positive number of trials", n_trials, where="trials"))
     if frames is not None and (isinstance(frames, bool) or not isinstance(frames, int) or frames < 1):
@@ -174,7 +191,8 @@ def make_trials(scenarios: Sequence[str], n_trials: int, methods: Sequence[str] 
     out = []
     for name, sc in zip(scenarios, loaded, strict=True):
         for i, s in enumerate(trial_seeds(sc.seed if seed is None else seed, n_trials)):
-            out += [Trial(str(name), i, s, m, frames, cov0, config) for m in methods]
+            out += [Trial(str(name), i, s, m, frames, cov0, config, p, f"@{p}" if len(policies) > 1 else "")
+                    for p in policies for m in methods]
     return out
 
 
@@ -278,9 +296,9 @@ def run_trials(trials: Sequence[Trial]) -> list[dict]:
     if not trials:
         return []
     first = trials[0]
-    same = (first.scenario, first.seed, first.frames, first.cov0.tobytes(), first.config)
+    same = (first.scenario, first.seed, first.frames, first.cov0.tobytes(), first.config, first.pan_policy)
     for t in trials[1:]:
-        if (t.scenario, t.seed, t.frames, t.cov0.tobytes(), t.config) != same:
+        if (t.scenario, t.seed, t.frames, t.cov0.tobytes(), t.config, t.pan_policy) != same:
             raise InputError(expected(f"tasks of one run ({first.scenario} seed {first.seed})",
                                       f"{t.scenario} seed {t.seed}", where="run_trials"))
     try:
@@ -296,6 +314,8 @@ def run_trials(trials: Sequence[Trial]) -> list[dict]:
                 source = SimulatedSource(run)
                 truth = TruthObserver()
                 config = first.config.with_source_defaults(source.config_defaults)
+                if first.pan_policy is not None:
+                    config = config.with_overrides({"pan": {"policy": first.pan_policy}}, "pan policy")
                 result = run_online(source, start_pose=start_belief(run, first.cov0), start_cov=first.cov0,
                                     config=config, method=method, observers=[truth])
                 runs[method] = truth, truth.result(result)
@@ -339,7 +359,7 @@ def _describe(exc: BaseException) -> str:
 def failed_result(trial: Trial, scenario: str, exc: BaseException) -> dict:
     """The line of ``trials.jsonl`` for a task that failed: ``scenario, trial, seed, method`` and ``error`` (the
     exception's class and message); it has none of the measures and :func:`summarize` leaves it out."""
-    return {"scenario": scenario, "trial": trial.index, "seed": trial.seed, "method": trial.method,
+    return {"scenario": scenario, "trial": trial.index, "seed": trial.seed, "method": trial.label,
             "error": _describe(exc)}
 
 
@@ -386,7 +406,7 @@ def _measures(trial: Trial, scenario: Scenario, source: TruthObserver, result: O
     on_plane = _on_plane_features(scenario, source.edges)
     eligible = _eligible_features(result, scenario, source.edges, on_plane)
     return {
-        "scenario": scenario.name, "trial": trial.index, "seed": trial.seed, "method": trial.method,
+        "scenario": scenario.name, "trial": trial.index, "seed": trial.seed, "method": trial.label,
         "frames": len(result.records),
         "nees_pose": pose_nees(poses, covs, T).tolist(), "position_error": err.tolist(), "nis": nis,
         "ate_rmse": ate_rmse(poses, T), "final_error": float(err[-1]),
@@ -517,7 +537,8 @@ def _bundles(trials: Sequence[Trial]) -> list[list[Trial]]:
     job (the smoother reuses that run)."""
     jobs: dict[tuple, list[Trial]] = {}
     for t in trials:
-        key = (t.scenario, t.index) if t.method in ("stablemarks", SMOOTHER) else (t.scenario, t.index, t.method)
+        key = (t.scenario, t.index, t.pan_policy) if t.method in ("stablemarks", SMOOTHER) else \
+            (t.scenario, t.index, t.pan_policy, t.method)
         jobs.setdefault(key, []).append(t)
     return list(jobs.values())
 
@@ -541,7 +562,7 @@ def evaluate(trials: Sequence[Trial], *, jobs: int = 1, backend: str = "loky", a
                 results.append(res)
                 if progress is not None:
                     progress(len(results), len(trials), res)
-    order = {(t.scenario, t.index, t.method): k for k, t in enumerate(trials)}
+    order = {(t.scenario, t.index, t.label): k for k, t in enumerate(trials)}
     names = {t.scenario: load_scenario(t.scenario).name for t in trials}
     rank = {(names[s], i, m): k for (s, i, m), k in order.items()}
 

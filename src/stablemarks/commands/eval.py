@@ -63,6 +63,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README)")
     p.add_argument("--out", default="results/eval", metavar="DIR", help="output folder (default results/eval)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures (report.md without them)")
+    p.add_argument("--pan-policy", metavar="P1,P2", default=None,
+                   help="run every method with these pan policies (fixed, free_edges, information; default: the "
+                        "scenario's); with more than one the methods are reported as METHOD@POLICY side by side")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the tasks already in DIR/trials.jsonl (from an interrupted evaluation) and run the rest")
 
 
 def run(args) -> int:
@@ -106,8 +111,18 @@ def run(args) -> int:
         raise InputError(expected(f"at most {MAX_FRAMES} frames", args.frames, where="--frames"))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     check_backend(args.backend)
-    trials = make_trials(args.scenarios, args.trials, methods, seed=args.seed, frames=args.frames,
-                         cov0=np.diag(sigma**2), config=config)
+    policies = None if args.pan_policy is None else [p.strip() for p in args.pan_policy.split(",") if p.strip()]
+    try:
+        trials = make_trials(args.scenarios, args.trials, methods, seed=args.seed, frames=args.frames,
+                             cov0=np.diag(sigma**2), config=config, pan_policies=policies)
+    except InputError as exc:
+        raise InputError(str(exc).replace("pan_policies:", "--pan-policy:")) from None
+    done: list[dict] = []
+    if args.resume:
+        done = _finished(out / "trials.jsonl")
+        finished = {(r["scenario"], r["trial"], r["seed"], r["method"]) for r in done}
+        names = {name: load_scenario(name).name for name in dict.fromkeys(args.scenarios)}
+        trials = [t for t in trials if (names[t.scenario], t.index, t.seed, t.label) not in finished]
     for name in dict.fromkeys(args.scenarios):
         cam = load_scenario(name).camera
         check_image_settings(config, cam.width, cam.height, f"scenario {name}'s camera")
@@ -116,25 +131,41 @@ def run(args) -> int:
     if args.jobs > MAX_JOBS:
         raise InputError(expected(f"at most {MAX_JOBS} jobs", args.jobs, where="--jobs"))
 
+    import json
+    import sys
+
     start = time.perf_counter()
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  TimeRemainingColumn(), console=console) as bar:
+    out.mkdir(parents=True, exist_ok=True)
+    plain = not sys.stdout.isatty()
+    last = [start]
+    with open(out / "trials.jsonl", "a" if args.resume else "w") as log, \
+            Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                     TimeRemainingColumn(), console=console, disable=plain) as bar:
         task = bar.add_task(f"{len(trials)} runs ({args.trials} trials × {len(set(methods))} methods × "
                             f"{len(args.scenarios)} scenarios)", total=len(trials))
 
         def progress(done, total, res):
+            # every finished task is kept at once: an interrupted evaluation continues with --resume
+            log.write(json.dumps(res) + "\n")
+            log.flush()
             state = "failed" if res.get("error") is not None else "done"
             bar.update(task, completed=done,
                        description=f"{res['scenario']} trial {res['trial']} {res['method']}: {state}")
+            if plain:
+                now = time.perf_counter()
+                ate = "failed" if res.get("error") is not None else f"ATE {res['ate_rmse']:.4f} m"
+                print(f"{res['scenario']} {res['method']} trial {res['trial']}: {ate}, {now - last[0]:.1f} s "
+                      f"({done}/{total})", flush=True)
+                last[0] = now
 
-        results = evaluate(trials, jobs=args.jobs, backend=args.backend, address=args.address, progress=progress)
+        results = done + evaluate(trials, jobs=args.jobs, backend=args.backend, address=args.address,
+                                  progress=progress) if trials else done
     wall = time.perf_counter() - start
     failed = failures(results)
     measured = [r for r in results if r.get("error") is None]
     summary = summarize(measured)
     goals = check_goals(summary)
 
-    out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".eval-", dir=out))
     try:
         (tmp / "trials.jsonl").write_text(trials_jsonl(results))
@@ -160,7 +191,7 @@ def run(args) -> int:
         lo, hi = first["nees_pose_bounds"]
         t = Table(title=f"{scen}: {first['trials']} trials × {first['frames']} frames "
                         f"(pose NEES bounds [{lo:.2f}, {hi:.2f}])")
-        t.add_column("method")
+        t.add_column("method", no_wrap=True)
         for _, heading, _ in REPORT_COLUMNS:
             t.add_column(heading, justify="right")
         for method, s in by_method.items():
@@ -189,3 +220,20 @@ def run(args) -> int:
               f"{out}/trials.jsonl and report.md)", file=sys.stderr)
         return 1
     return 0
+
+
+def _finished(path: Path) -> list[dict]:
+    """The tasks an earlier (interrupted) evaluation wrote to ``trials.jsonl``; a torn last line is dropped."""
+    import json
+
+    if not path.is_file():
+        raise InputError(f"{path}: no trials.jsonl to resume")
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            r = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if isinstance(r, dict) and {"scenario", "trial", "seed", "method"} <= set(r):
+            out.append(r)
+    return out

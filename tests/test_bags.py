@@ -339,3 +339,23 @@ def test_not_a_bag(tmp_path, inputs):
     path.write_bytes(b"#ROSBAG V9.9\nnonsense")
     with pytest.raises(SequenceError, match=r"junk\.bag: cannot read the bag: "):
         open_lab_bag(path, inputs)
+
+
+def test_the_streaming_api_on_a_ros2_bag_gives_the_trajectory_of_run(tmp_path, inputs):
+    """``sm.open_sequence`` + ``sm.Localizer.step`` over a ROS 2 bag equals ``stablemarks run`` on it (1e-9)."""
+    import stablemarks as sm
+    from stablemarks.cli import main
+    from stablemarks.io.trajectory import read_tum
+
+    bag = write_bag(tmp_path / "lab", lab_messages())
+    seq = sm.open_sequence(bag, left_topic=LEFT, right_topic=RIGHT, odom_topic=ODOM, pan_topic=PAN,
+                           calib=inputs["calib"], map=inputs["map"], mount=inputs["mount"])
+    loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=sm.Config())
+    poses = [loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan).pose for f in seq]
+    seq.close()
+    assert main(["run", str(bag), "--left-topic", LEFT, "--right-topic", RIGHT, "--odom-topic", ODOM,
+                 "--pan-topic", PAN, "--calib", str(inputs["calib"]), "--map", str(inputs["map"]),
+                 "--camera", str(inputs["mount"]), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    _, from_run = read_tum(tmp_path / "out" / "trajectory.tum")
+    np.testing.assert_allclose(from_run, poses, rtol=0, atol=1e-9)
+    assert loc.landmarks()

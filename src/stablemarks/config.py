@@ -107,10 +107,14 @@ DERIVED = {
 
 @dataclass(frozen=True)
 class Config:
-    """Every threshold of the pipeline, grouped by stage (module docstring).
+    """Every setting of the method, grouped by section (frozen; change it with :meth:`with_overrides`).
 
-    The settings of :data:`DERIVED` are set from their home in ``__post_init__``: a ``Config`` built
-    with another value for them gets the derived one.
+    Sections: ``noise`` (line-column and boundary noise [px]), ``odometry`` (wheel-odometry noise per metre
+    and per radian), ``pan`` (where the head looks [rad, rad/s]), ``segments``, ``matching``, ``sad``
+    (block size and disparity range [px]), ``filter``, ``planes``, ``landmarks`` (selection and entry limits
+    [m, deg]), ``ekf`` and ``health``. Units are in each section's field docstrings. ``Config.preset("paper")``
+    gives the paper's noise values. The settings of :data:`DERIVED` are set from their home in
+    ``__post_init__``: a ``Config`` built with another value for them gets the derived one.
     """
 
     noise: NoiseConfig = field(default_factory=NoiseConfig)

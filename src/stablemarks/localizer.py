@@ -130,7 +130,9 @@ class Estimate:
     pose : (3,) ``(x [m], y [m], theta [rad])`` of the robot in the map after the frame.
     cov : (3, 3) its covariance over ``(x, y, theta)`` [m², m², rad²].
     pan_command : the head pan [rad] the method asks for next (the pan policy's choice from this estimate).
-    health : warnings about the filter's state, empty when all is well.
+    health : warnings about the filter's state, one sentence per condition that holds, starting with its name
+        (``edges_not_found``, ``inconsistent``, ``odometry_disagrees``, ``blind``: :mod:`stablemarks.health`);
+        empty when all is well.
     record : everything the frame did (:class:`FrameRecord`), for logs.
     front : the stereo front end's output (None for ``dead_reckoning``).
     model : the frame's landmark model on the reference planes (None where the method has none).
@@ -179,7 +181,7 @@ class Localizer:
     world_map : the map of walls (reference planes).
     camera : the rectified stereo head on its mount, pan 0 (its ``sigma_img`` is replaced by the
         configuration's ``noise.sigma_img``).
-    start_pose : (3,) the robot's start in the map; default the origin.
+    start_pose : (3,) the robot's start ``(x [m], y [m], theta [rad])`` in the map frame; default the origin.
     start_cov : (3, 3) its covariance; default σ = 5 cm, 5 cm, 1° (:data:`DEFAULT_START_COV`).
     config : every setting (:class:`stablemarks.Config`).
     method : ``stablemarks`` (default), ``plane_no_selection``, ``all_segments`` or ``dead_reckoning``

@@ -133,7 +133,12 @@ class ReferencePlane:
 
 @dataclass(frozen=True)
 class Map:
-    """A set of walls in the map frame."""
+    """The walls of a map, in the map frame (2-D ``x, y`` [m], z up; REP-103).
+
+    ``planes`` are the walls (:class:`ReferencePlane`: a vertical plane standing on the floor segment
+    ``p1 → p2`` [m], with its free edges, heights ``z`` [m], visible side and whether it is a reference plane
+    or only an occluder). ``map[id]`` gives a wall by id; iterating gives the walls in order.
+    """
 
     planes: tuple[ReferencePlane, ...]
     frame: str = "map"
@@ -437,7 +442,9 @@ def read_yaml(path: str | Path, what: str = "file") -> object:
 
 
 def load_map(path: str | Path) -> Map:
-    """Load and validate a map file (format in the module docstring)."""
+    """Load and validate a map file (YAML, metres, map frame: ``planes`` with ``id``, ``p1``, ``p2``, optional
+    ``free_edges``, ``z``, ``visible_from``, ``reference``; the module docstring has the format). A malformed
+    file raises :class:`~stablemarks.errors.ConfigError` naming the file and the field."""
     return parse_map(read_yaml(path, "map file"), str(path))
 
 

@@ -4,11 +4,16 @@ All timings are single-threaded (BLAS via threadpoolctl, OpenCV via ``cv2.setNum
 kernels are compiled single-threaded), after a warm-up, as the median of repeated runs; the machine is
 shared, so ratios to a reference measured in the same run are the figures to read, not absolute times.
 
-- Per frame at 640×480 with 64 disparities on a rendered ``lab`` pair: segment extraction (both images),
-  segment matching, SAD disparity (both directions + left-right check), the disparity filter, plane
-  prediction and fitting, boundary/modeling/selection, and one EKF update — next to one call of OpenCV's
-  ``StereoBM`` (15×15, 64 disparities) on the same pair. ``ratio_pipeline_vs_stereobm`` is the whole
-  per-frame pipeline over that call.
+- Per frame at 640×480 with 64 disparities on a rendered ``lab`` pair, the pipeline as the localizer runs it
+  (:meth:`~stablemarks.localizer.Localizer.step`): the planes' disparity regions from the pose prior
+  (``plane_regions``), segment extraction (both images), segment matching, SAD disparity (both directions +
+  left-right check) only where the method reads it, the disparity filter, plane prediction and fitting,
+  boundary/modeling/selection, and one EKF association + update — next to one call of OpenCV's ``StereoBM``
+  (15×15, 64 disparities) on the same pair. ``ratio_pipeline_vs_stereobm`` is the whole per-frame pipeline over
+  that call (``pipeline_fps`` its frames per second), ``ratio_disparity_vs_stereobm`` the pipeline's SAD alone
+  (in regions, with what the landmark stage adds; ``disparity_ms`` is the same inside the pipeline, where the
+  other stages leave the caches cold). The same with the dense disparity images (``*_dense``) for comparison,
+  and both pipelines on frames across the lab run (``run_*``: the regions vary with the view).
 - The EKF update against filterpy's ``ExtendedKalmanFilter`` doing the same update on the same numbers,
   for 10 to 2000 landmarks (``ratio_ekf_vs_filterpy_1000``, ``max_abs_diff``).
 - Memory: traced allocation peak per frame over a run of the on-line loop, to show it stays flat.
@@ -55,15 +60,57 @@ def lab_pair(seed: int = 1):
     return frame, scenario, run, scenario.camera.with_pan(run.pans[0])
 
 
-def stage_times(repeats: int = 15) -> dict:
-    """Per-frame time of every stage [ms] and the ratios to one StereoBM call on the same pair."""
-    from .config import Config
+def _pipeline(left, right, camera, world_map, X, cov_X, config, ekf, regions: bool = True) -> dict:
+    """One frame through the pipeline as :meth:`Localizer.step` runs it; the time of each stage [s]."""
+    from .pipeline import plane_regions, run_front_end, select_landmarks
+
+    t0 = time.perf_counter()
+    reg = plane_regions(camera, X, cov_X, world_map, config, left.shape) if regions else None
+    t1 = time.perf_counter()
+    front = run_front_end(left, right, config, reg)
+    model = select_landmarks(front, camera, world_map, X, cov_X, config)
+    t2 = time.perf_counter()
+    if ekf is not None and ekf.n_landmarks:
+        pairs = front.kept_pairs
+        measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+        e = ekf.copy()
+        chosen = e.select_for_update(e.associate_joint(measured, 0.0))
+        e.update([(i, measured[j]) for i, j in chosen])
+    t3 = time.perf_counter()
+    m = model.timings
+    return {"regions": t1 - t0, "segments": front.timings["segments"], "matching": front.timings["matching"],
+            "disparity": front.timings["disparity"] + m["disparity"], "filter": front.timings["filter"],
+            "planes": m["total"] - m["landmarks"] - m["disparity"], "landmarks": m["landmarks"], "ekf": t3 - t2,
+            "pipeline": t3 - t0, "_model": model}
+
+
+def _frame_ekf(left, right, camera, world_map, X, cov_X, config):
+    """The EKF as after this frame: a wall landmark for every selected candidate."""
     from .estimation import JointEKF, NewLandmark
-    from .landmarks import landmarks_on_plane
-    from .pipeline import valid_columns
-    from .planes import fit_plane, predict_planes
+
+    model = _pipeline(left, right, camera, world_map, X, cov_X, config, None)["_model"]
+    ekf = JointEKF(camera, X, cov_X, config.ekf)
+    if model.selected:
+        ekf.add_landmarks([NewLandmark.wall(world_map[c.plane_id], c.s, c.edge) for c in model.selected],
+                          np.diag([c.sigma_s**2 for c in model.selected]))
+    return ekf
+
+
+def _median_stages(fn: Callable[[], dict], repeats: int, warmup: int = 2) -> dict:
+    """Median of each stage of ``fn()`` over ``repeats`` runs after ``warmup``."""
+    for _ in range(warmup):
+        fn()
+    runs = [fn() for _ in range(repeats)]
+    return {k: statistics.median(r[k] for r in runs) for k in runs[0] if not k.startswith("_")}
+
+
+def stage_times(repeats: int = 15, run_frames: tuple[int, ...] = (0, 5, 10, 15, 20)) -> dict:
+    """Per-frame time of every stage [ms] and the ratios to one StereoBM call on the same pair, the pipeline as
+    the localizer runs it (disparity in regions) and with the dense disparity images; ``run_frames``: frames of
+    the lab run timed too (mean over them of each frame's median)."""
+    from .config import Config
+    from .pipeline import edge_windows, front_disparity, plane_regions, prediction_regions
     from .vision.area_stereo import compute_disparity
-    from .vision.filter import filter_pairs
     from .vision.segment_stereo import match_segments
     from .vision.segments import extract_vertical_segments
 
@@ -78,63 +125,61 @@ def stage_times(repeats: int = 15) -> dict:
     with threadpool_limits(1):
         bm = cv2.StereoBM_create(numDisparities=64, blockSize=15)
         out["stereobm"] = median_time(lambda: bm.compute(left, right), repeats)
+        out["disparity_dense"] = median_time(lambda: compute_disparity(left, right, config.sad), repeats)
+        ekf = _frame_ekf(left, right, camera, world_map, X, cov_X, config)
+        stages = _median_stages(lambda: _pipeline(left, right, camera, world_map, X, cov_X, config, ekf), repeats)
+        dense = _median_stages(lambda: _pipeline(left, right, camera, world_map, X, cov_X, config, ekf, False),
+                               repeats)
+        out.update(stages)
+        out["pipeline_dense"] = dense["pipeline"]
+        out["disparity_dense_in_pipeline"] = dense["disparity"]
+        # the pipeline's SAD alone, like the StereoBM call: the front end's (in regions) and what the landmark
+        # stage adds (the planes' pixels still missing, the border columns its edge windows need)
+        reg = plane_regions(camera, X, cov_X, world_map, config, left.shape)
         seg_l = extract_vertical_segments(left, config.segments)
-        seg_r = extract_vertical_segments(right, config.segments)
-        out["segments"] = median_time(lambda: (extract_vertical_segments(left, config.segments),
-                                               extract_vertical_segments(right, config.segments)), repeats)
-        pairs = match_segments(seg_l, seg_r, config.matching)
-        out["matching"] = median_time(lambda: match_segments(seg_l, seg_r, config.matching), repeats)
-        disp = compute_disparity(left, right, config.sad)
-        out["disparity"] = median_time(lambda: compute_disparity(left, right, config.sad), repeats)
-        f = config.filter
+        pairs = match_segments(seg_l, extract_vertical_segments(right, config.segments), config.matching)
 
-        def run_filter():
-            return filter_pairs(pairs, seg_l, disp.left, disp.valid, tolerance=f.tolerance,
-                                min_support=f.min_support, search_radius=f.search_radius)
+        def sad_in_regions():
+            _, lazy = front_disparity(left, right, config, reg, pairs, seg_l)
+            if lazy is not None:
+                lazy.compute_regions(prediction_regions(reg.predictions, left.shape, config))
+                lazy.decide_columns(edge_windows(reg.predictions, config))
 
-        kept = run_filter()
-        out["filter"] = median_time(run_filter, repeats)
-        kept_pairs = pairs.subset(kept)
-
-        def planes():
-            preds = predict_planes(camera, X, cov_X, world_map, config.planes)
-            return [fit_plane(camera, X, disp.left, p, config.planes) for p in preds]
-
-        fits = planes()
-        out["planes"] = median_time(planes, repeats)
-
-        def model():
-            cols = valid_columns(disp)
-            return [landmarks_on_plane(camera, fit, kept_pairs, seg_l, disp.right, config.landmarks,
-                                       config.planes, float(config.sad.block_size), cols) for fit in fits if fit]
-
-        models = model()
-        out["landmarks"] = median_time(model, repeats)
-        cands = [c for m in models for c in m.candidates if c.selected]
-        ekf = JointEKF(camera, X, cov_X, config.ekf)
-        ids = ekf.add_landmarks([NewLandmark.wall(world_map[c.plane_id], c.s, c.edge) for c in cands],
-                                np.diag([c.sigma_s**2 for c in cands]))
-        measured = np.stack([kept_pairs.u_left, kept_pairs.u_right], axis=-1)
-
-        def ekf_step():
-            e = ekf.copy()
-            assoc = e.associate_joint(measured, 0.0)
-            chosen = e.select_for_update(assoc)
-            e.update([(i, measured[j]) for i, j in chosen])
-
-        out["ekf"] = median_time(ekf_step, repeats)
-        assert len(ids) == len(cands)
-    front = out["segments"] + out["matching"] + out["disparity"] + out["filter"]
-    pipeline = front + out["planes"] + out["landmarks"] + out["ekf"]
+        out["disparity_alone"] = median_time(sad_in_regions, repeats)
+        # frames across the run, each from its true pose with the regions the localizer would compute there
+        per_frame = []
+        for k in (k for k in run_frames if k < len(run)):
+            f = run.render(k)
+            cam_k = scenario.camera.with_pan(run.pans[k])
+            X_k = run.poses[k].as_array()
+            ekf_k = _frame_ekf(f.left, f.right, cam_k, world_map, X_k, cov_X, config)
+            row = [median_time(lambda f=f: bm.compute(f.left, f.right), repeats)]
+            for regions in (True, False):
+                row.append(_median_stages(lambda f=f, c=cam_k, x=X_k, e=ekf_k, r=regions: _pipeline(
+                    f.left, f.right, c, world_map, x, cov_X, config, e, r), repeats)["pipeline"])
+            per_frame.append(row)
+    front = out["regions"] + out["segments"] + out["matching"] + out["disparity"] + out["filter"]
+    pipeline = out["pipeline"]
     res = {f"{k}_ms": 1000 * v for k, v in out.items()}
     res.update(
         front_end_ms=1000 * front,
-        pipeline_ms=1000 * pipeline,
+        pipeline_fps=1.0 / pipeline,
+        pipeline_dense_fps=1.0 / out["pipeline_dense"],
         ratio_segments_vs_stereobm=out["segments"] / out["stereobm"],
-        ratio_disparity_vs_stereobm=out["disparity"] / out["stereobm"],
+        ratio_disparity_vs_stereobm=out["disparity_alone"] / out["stereobm"],
+        ratio_disparity_dense_vs_stereobm=out["disparity_dense"] / out["stereobm"],
+        ratio_disparity_in_pipeline_vs_dense=out["disparity"] / out["disparity_dense_in_pipeline"],
         ratio_front_end_vs_stereobm=front / out["stereobm"],
         ratio_pipeline_vs_stereobm=pipeline / out["stereobm"],
+        ratio_pipeline_dense_vs_stereobm=out["pipeline_dense"] / out["stereobm"],
     )
+    if per_frame:
+        t = np.asarray(per_frame)
+        res.update(run_frames=[k for k in run_frames if k < len(run)],  # each with its EKF update
+                   run_stereobm_ms=1000 * float(t[:, 0].mean()), run_pipeline_ms=1000 * float(t[:, 1].mean()),
+                   run_pipeline_dense_ms=1000 * float(t[:, 2].mean()),
+                   ratio_run_pipeline_vs_stereobm=float(t[:, 1].mean() / t[:, 0].mean()),
+                   ratio_run_pipeline_dense_vs_stereobm=float(t[:, 2].mean() / t[:, 0].mean()))
     return res
 
 

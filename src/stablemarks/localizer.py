@@ -35,7 +35,7 @@ from .geometry import SE2, StereoCamera
 from .health import HealthMonitor
 from .maps import Map
 from .methods import Entered, Method, method_named
-from .pipeline import FrameLandmarks, FrontEnd, check_pair, run_front_end
+from .pipeline import FrameLandmarks, FrontEnd, Regions, check_pair, plane_regions, run_front_end
 from .viewing import choose_pan
 
 DEFAULT_START_COV = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
@@ -188,6 +188,10 @@ class Localizer:
         (:mod:`stablemarks.methods`), or a :class:`~stablemarks.methods.Method` object.
     prior_landmarks : a landmark map saved by an earlier run (the document of ``landmarks.yaml``).
     """
+
+    dense_disparity = False
+    """True: the front end computes the whole disparity images (to look at them); by default only what the
+    method reads (:func:`~stablemarks.pipeline.plane_regions`), with the same results."""
 
     def __init__(self, world_map: Map, camera: StereoCamera, *, start_pose=None, start_cov=None,
                  config: Config | None = None, method: str | Method = "stablemarks", prior_landmarks=None):
@@ -344,10 +348,14 @@ class Localizer:
         nis_high = disagree = edges_missing = False
         if method.uses_vision:
             check_pair(np.asarray(left), np.asarray(right))
-            front = run_front_end(left, right, self.config)
+            cam_k = self.camera.with_pan(pan)
+            regions = None  # dense; else SAD only where the method reads it, with the same results (pipeline.py)
+            if not self.dense_disparity:
+                regions = plane_regions(cam_k, self.ekf.pose, self.ekf.cov_pose, self.world_map, self.config,
+                                        np.shape(left)) if method.models_planes else Regions.none()
+            front = run_front_end(left, right, self.config, regions)
             timings.update(front.timings)
             t2 = time.perf_counter()
-            cam_k = self.camera.with_pan(pan)
             model = method.model(front, cam_k, self.world_map, self.ekf.pose, self.ekf.cov_pose, self.config)
             if model is not None:
                 record.warnings, record.n_candidates = list(model.warnings), len(model.candidates)

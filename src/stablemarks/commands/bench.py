@@ -50,22 +50,35 @@ def run(args) -> int:
                                   where="--memory-frames"))
     if args.json:
         check_out_file(args.json, "--json")
-    console.print("single-threaded (BLAS, OpenCV, numba), median of repeated runs on a rendered 640×480 lab pair")
+    console.print("single-threaded (BLAS, OpenCV, numba), median of repeated runs on a rendered 640×480 lab pair; "
+                  "the pipeline as the localizer runs it: SAD only where the method reads it")
     stages = stage_times(args.repeats)
     t = Table(title="per-frame time, 640×480, 64 disparities")
     t.add_column("stage")
     t.add_column("ms", justify="right")
     t.add_column("× one StereoBM call", justify="right")
     for key, label in (("stereobm", "OpenCV StereoBM (15×15, 64 disp.), reference"),
+                       ("regions", "planes' disparity regions from the prior"),
                        ("segments", "vertical segments, both images"), ("matching", "segment matching (DP)"),
-                       ("disparity", "SAD both directions + L-R check"), ("filter", "disparity filter"),
+                       ("disparity", "SAD both directions + L-R check, in regions"), ("filter", "disparity filter"),
                        ("planes", "plane prediction + fit"), ("landmarks", "boundary, model, selection"),
-                       ("ekf", "EKF association + update"), ("front_end", "front end (first four)"),
-                       ("pipeline", "whole per-frame pipeline")):
+                       ("ekf", "EKF association + update"), ("front_end", "front end (first five)"),
+                       ("pipeline", "whole per-frame pipeline"),
+                       ("disparity_alone", "SAD in regions, alone (as StereoBM)"),
+                       ("disparity_dense", "SAD both directions + L-R check, dense, alone"),
+                       ("disparity_dense_in_pipeline", "the same inside the pipeline"),
+                       ("pipeline_dense", "whole pipeline with dense SAD")):
         ms = stages[f"{key}_ms"]
         t.add_row(label, f"{ms:.1f}", f"{ms / stages['stereobm_ms']:.2f}")
+    if "run_pipeline_ms" in stages:
+        for key, label in (("pipeline", "whole pipeline, lab frames " + ", ".join(map(str, stages["run_frames"]))),
+                           ("pipeline_dense", "the same with dense SAD")):
+            ms = stages[f"run_{key}_ms"]
+            t.add_row(label, f"{ms:.1f}", f"{ms / stages['run_stereobm_ms']:.2f}")
     console.print(t)
-    out = {"stages": stages, **{k: v for k, v in stages.items() if k.startswith("ratio_")}}
+    console.print(f"whole pipeline: {stages['pipeline_fps']:.0f} frames/s "
+                  f"(with dense SAD {stages['pipeline_dense_fps']:.0f} frames/s)")
+    out = {"stages": stages, **{k: v for k, v in stages.items() if k.startswith(("ratio_", "pipeline_fps"))}}
     ekf = ekf_vs_filterpy(sizes)
     if "skipped" in ekf:
         console.print(f"[yellow]EKF comparison skipped:[/] {ekf['skipped']}")

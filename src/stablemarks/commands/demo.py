@@ -66,7 +66,7 @@ def run(args) -> int:
     cov0 = np.diag(sigma**2)
     camera = scenario.camera.with_pan(sim.pans[0])
     console.rule(f"[bold]{scenario.name}[/]: first view, landmark modeling and selection (paper Sec 6, Table 1)")
-    result = process_frame(frame.left, frame.right, camera, scenario.map, X0, cov0, config)
+    result = process_frame(frame.left, frame.right, camera, scenario.map, X0, cov0, config, dense=True)  # Fig 6
     for w in result.warnings:
         console.print(f"[yellow]warning:[/] {w}")
     console.print(landmark_table(result.candidates, mm=True, title="stablemarks, first view"))

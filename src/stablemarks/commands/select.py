@@ -58,7 +58,7 @@ def run(args) -> int:
         camera = camera.with_pan(pan)
     left, right = load_stereo_pair(args.left, args.right, calibration)
     check_image_settings(config, left.shape[1], left.shape[0], f"{args.left}")
-    result = process_frame(left, right, camera, world_map, X, cov_X, config)
+    result = process_frame(left, right, camera, world_map, X, cov_X, config, dense=True)  # Fig 6 shows all
     write_landmarks(out, result.candidates, extra={"pose": X.tolist(), "cov_pose": cov_X.tolist(),
                                                     "warnings": result.warnings})
     for w in result.warnings:

@@ -96,9 +96,7 @@ class HealthMonitor:
             self.edges_latched = False
         if self.edges_latched:
             self.runs["edges_not_found"] = max(self.runs["edges_not_found"], c.edges_frames)
-        need = {"edges_not_found": c.edges_frames, "inconsistent": c.nis_frames,
-                "odometry_disagrees": c.disagree_frames, "blind": c.blind_frames}
-        return [MESSAGES[k].format(n=self.runs[k], factor=inflation) for k in CONDITIONS if self.runs[k] >= need[k]]
+        return [MESSAGES[k].format(n=self.runs[k], factor=inflation) for k in CONDITIONS if self.holds(k)]
 
     def suspect_edges(self, edges_missing: bool) -> bool:
         """Whether, with this frame's ``edges_missing``, ``edges_not_found`` will hold after :meth:`update`."""
@@ -109,6 +107,7 @@ class HealthMonitor:
 
     def holds(self, name: str) -> bool:
         """Whether condition ``name`` held at the last update."""
-        need = {"edges_not_found": self.config.edges_frames, "inconsistent": self.config.nis_frames,
-                "odometry_disagrees": self.config.disagree_frames, "blind": self.config.blind_frames}[name]
+        c = self.config
+        need = {"edges_not_found": c.edges_frames, "inconsistent": c.nis_frames,
+                "odometry_disagrees": c.disagree_frames, "blind": c.blind_frames}[name]
         return self.runs[name] >= need

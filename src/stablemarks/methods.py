@@ -83,7 +83,7 @@ class Method:
         keep, dropped = [], []
         for i, j in assoc:
             c = by_pair.get(j)
-            if c is None or i in dropped:
+            if c is None:  # a point landmark, or a pair the model did not place on a wall
                 keep.append((i, j))
                 continue
             lm = ekf.landmark(i)

@@ -214,7 +214,7 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
 
     def wall(lid: int) -> tuple[ReferencePlane, str]:
         if lid not in walls:
-            lm = result.landmark(lid) if hasattr(result, "landmark") else result.ekf.landmark(lid)
+            lm = result.landmark(lid)  # in the final filter, or as it was when dropped
             if lm.kind != "wall":
                 raise InputError(expected("wall landmarks (a stablemarks or plane_no_selection run)",
                                           f"a {lm.kind} landmark (id {lid})", where="batch_smooth"))

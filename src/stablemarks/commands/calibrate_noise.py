@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="standard deviations of the start pose belief for the consistency runs")
 
 
-def _sources(args, console):
+def _sources(args):
     """(name, make_source(), start pose or None, truth-observer wanted) for every SEQ, checked up front."""
     from ..evaluation import start_belief, trial_seeds
     from ..io.sources import open_sequence
@@ -102,7 +102,7 @@ def run(args) -> int:
         raise InputError(f"{out.parent}: no such folder for --out")
     base = Config.preset(args.preset) if args.preset else Config()
     current = load_run_config(args, None, base=base)
-    sources, cov0 = _sources(args, console)
+    sources, cov0 = _sources(args)
 
     samples = NoiseSamples()
     for name, make, _ in sources:

@@ -156,3 +156,74 @@ def test_records_replay_the_filter(lab_short, lab_scenario):
     assert sum(len(r.measurements) for r in result.records) > 20
     np.testing.assert_allclose(ekf.pose, result.ekf.pose, atol=1e-12)
     np.testing.assert_allclose(ekf.cov_pose, result.ekf.cov_pose, atol=1e-15)
+
+
+def _untimed(log_path) -> list[dict]:
+    import json
+
+    lines = [json.loads(line) for line in log_path.read_text().splitlines()]
+    for r in lines:
+        assert set(r.pop("timings")) >= {"segments", "total"}
+    return lines
+
+
+def test_log_is_streamed_while_the_loop_keeps_only_poses(lab_scenario, tmp_path):
+    """``LogWriter`` writes ``log.jsonl`` frame by frame, line for line what ``write_run`` writes from the whole
+    records; with ``keep="poses"`` the loop holds only what the end-of-run outputs read, with ``"nothing"``
+    nothing (and still counts the frames)."""
+    from stablemarks.io.results import LogWriter
+    from stablemarks.online import PoseRecord
+
+    run = simulate_run(lab_scenario, seed=6)
+    lines_seen = []
+
+    def after_log(frame, est, localizer):  # the line is on disk before the next observer runs
+        lines_seen.append(len((tmp_path / "streamed" / "log.jsonl").read_text().splitlines()))
+
+    with LogWriter(tmp_path / "streamed" / "log.jsonl") as log:
+        full = run_online(ShortSource(run, 4), observers=[log, after_log])
+    assert lines_seen == [1, 2, 3, 4] and log.frames == 4
+    paths = write_run(tmp_path / "whole", full)
+    assert (tmp_path / "streamed" / "log.jsonl").read_text() == paths["log"].read_text()
+
+    with LogWriter(tmp_path / "slim" / "log.jsonl") as log:
+        slim = run_online(ShortSource(run, 4), observers=[log], keep="poses")
+    assert all(isinstance(r, PoseRecord) for r in slim.records) and slim.n_frames == full.n_frames == 4
+    assert not hasattr(slim.records[0], "measurements")
+    for name in ("stamps", "poses", "covs", "dead_reckoning", "true_poses"):
+        np.testing.assert_array_equal(getattr(slim, name), getattr(full, name), err_msg=name)
+    assert [r.pan for r in slim.records] == [r.pan for r in full.records]
+    assert [r.n_landmarks for r in slim.records] == [r.n_landmarks for r in full.records]
+    written = write_run(tmp_path / "slim", slim, log=log.path)
+    assert written["log"] == log.path
+    for name in ("trajectory", "dead_reckoning", "groundtruth", "landmarks"):
+        assert written[name].read_text() == paths[name].read_text(), name
+    assert _untimed(tmp_path / "slim" / "log.jsonl") == _untimed(paths["log"])  # another run: other wall times
+    with pytest.raises(ValueError, match="keep='poses'"):
+        write_run(tmp_path / "nolog", slim)
+    assert not (tmp_path / "nolog").exists()
+
+    none = run_online(ShortSource(run, 4), keep="nothing")
+    assert none.records == [] and none.n_frames == 4
+    np.testing.assert_array_equal(none.ekf.state, full.ekf.state)
+    with pytest.raises(ValueError, match="keep"):
+        run_online(ShortSource(run, 1), keep="some")
+
+
+def test_an_interrupted_run_keeps_its_streamed_log(lab_scenario, tmp_path):
+    """The log of the frames done is on disk, whole lines, when the loop stops with an error."""
+    import json
+
+    from stablemarks.io.results import LogWriter
+
+    class Broken(SimulatedSource):
+        def frame(self, k, pan=None):
+            if k == 2:
+                raise OSError("the recording ends here")
+            return super().frame(k, pan)
+
+    run = simulate_run(lab_scenario, seed=6)
+    with pytest.raises(OSError), LogWriter(tmp_path / "log.jsonl") as log:
+        run_online(Broken(run, frames=4), observers=[log], keep="poses")
+    lines = (tmp_path / "log.jsonl").read_text().splitlines()
+    assert [json.loads(line)["index"] for line in lines] == [0, 1]

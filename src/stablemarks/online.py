@@ -5,13 +5,18 @@
 whose head follows commands (the simulator), calls the observers after each step and collects the
 records. What a frame does is the localizer's business; what is done with the frames' records (logs,
 figures, the evaluation's ground-truth bookkeeping) is the observers' and the caller's.
+
+How much of each frame the loop keeps is the caller's choice (``keep``): the whole :class:`FrameRecord`
+(the evaluation and the smoother read the measurements and priors), only the :class:`PoseRecord` the
+end-of-run outputs need (a long run whose log is streamed to disk by an observer,
+:class:`stablemarks.io.results.LogWriter`), or nothing (a soak that only measures).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -29,9 +34,39 @@ class Observer(Protocol):
     def __call__(self, frame: Frame, estimate: Estimate, localizer: Localizer) -> None: ...
 
 
+@dataclass(frozen=True, slots=True)
+class PoseRecord:
+    """The slim part of a :class:`FrameRecord` that a run's end-of-run outputs read (trajectories, Figure 10,
+    the motion summary, ``trajectory.kitti``): kept per frame by ``run_online(..., keep="poses")``.
+
+    It has no measurements, priors, NIS or landmark lists: code that needs them fails on the attribute
+    instead of reading an empty list.
+    """
+
+    index: int
+    stamp: float
+    pan: float
+    pose: np.ndarray
+    cov_pose: np.ndarray
+    dead_reckoning: np.ndarray
+    true_pose: np.ndarray | None
+    n_landmarks: int
+
+    @classmethod
+    def of(cls, r: FrameRecord) -> PoseRecord:
+        return cls(r.index, r.stamp, r.pan, r.pose, r.cov_pose, r.dead_reckoning, r.true_pose, r.n_landmarks)
+
+
+Keep = Literal["records", "poses", "nothing"]
+"""What :func:`run_online` keeps per frame: the whole :class:`FrameRecord`, its :class:`PoseRecord`, or none."""
+
+
 @dataclass
 class OnlineResult:
     """A whole run: per-frame records, the final filter and the first view's landmark model.
+
+    ``records`` holds a :class:`FrameRecord` per frame, or a :class:`PoseRecord` per frame, or nothing,
+    as ``run_online``'s ``keep`` asked; ``n_frames`` is the number of frames run either way.
 
     ``truth_of`` (landmark id → true feature id), ``rejected_truth`` (true feature id → the reason the
     selection rejected it) and ``visible_truth`` (per frame, the true features in view) are filled by the
@@ -50,6 +85,13 @@ class OnlineResult:
     visible_truth: list[list[str]] = field(default_factory=list)
     retired: dict = field(default_factory=dict)
     """Landmarks dropped from the filter during the run, as they were when dropped (id → estimate)."""
+    frames_run: int | None = None
+    """Frames run when the records were not kept (``keep="nothing"``); None: one per record."""
+
+    @property
+    def n_frames(self) -> int:
+        """The number of frames run."""
+        return len(self.records) if self.frames_run is None else self.frames_run
 
     def landmark(self, landmark_id: int):
         """A landmark of the run: in the final filter, or as it was when dropped."""
@@ -96,6 +138,7 @@ def run_online(
     config: Config | None = None,
     method: str = "stablemarks",
     prior_landmarks=None,
+    keep: Keep = "records",
 ) -> OnlineResult:
     """Step ``localizer`` through every frame of ``source`` and collect the records.
 
@@ -104,7 +147,14 @@ def run_online(
     defaults — :attr:`~stablemarks.frames.FrameSource.config_defaults` — fill what it leaves at the default).
     A steerable source (:class:`~stablemarks.frames.SteerableSource`) takes each frame's pan from
     :meth:`Localizer.command_pan`. ``progress(k, n)`` is called after each frame.
+
+    ``keep``: ``"records"`` (default) keeps every frame's :class:`FrameRecord`; ``"poses"`` only its
+    :class:`PoseRecord` (the observers still see the whole record: stream the log with
+    :class:`stablemarks.io.results.LogWriter`); ``"nothing"`` keeps no per-frame data (``result.n_frames``
+    still counts the frames).
     """
+    if keep not in ("records", "poses", "nothing"):
+        raise ValueError(f"keep: expected 'records', 'poses' or 'nothing', got {keep!r}")
     if localizer is None:
         config = (config or Config()).with_source_defaults(getattr(source, "config_defaults", None) or {})
         start = source.initial_pose if start_pose is None else start_pose
@@ -112,20 +162,25 @@ def run_online(
                               config=config, method=method, prior_landmarks=prior_landmarks)
     if isinstance(source, SteerableSource):
         source.steer(localizer.command_pan)
-    records: list[FrameRecord] = []
+    records: list[FrameRecord] | list[PoseRecord] = []
     first_view = None
     n = len(source)
+    done = 0
     for frame in source:
         est = localizer.step(frame.stamp, frame.left, frame.right, odometry=frame.odometry, pan=frame.pan)
         if first_view is None and est.model is not None:
             first_view = est.model
-        record = est.record
         if frame.true_pose is not None:
-            record = replace(record, true_pose=np.asarray(frame.true_pose, dtype=float))
-        records.append(record)
+            est = replace(est, record=replace(est.record, true_pose=np.asarray(frame.true_pose, dtype=float)))
+        if keep == "records":
+            records.append(est.record)
+        elif keep == "poses":
+            records.append(PoseRecord.of(est.record))
+        done += 1
         for observe in observers:
             observe(frame, est, localizer)
         if progress is not None:
-            progress(len(records), n)
+            progress(done, n)
     return OnlineResult(source.name, localizer.method.name, records, localizer.ekf, localizer.world_map, first_view,
-                        cov0=localizer.start_cov, retired=dict(localizer.retired))
+                        cov0=localizer.start_cov, retired=dict(localizer.retired),
+                        frames_run=done if keep == "nothing" else None)

@@ -53,10 +53,10 @@ def dead_reckoning_2sigma(result, noise) -> float:
     from ..geometry import SE2
 
     cov = np.asarray(result.cov0, dtype=float).copy()
-    X = result.dead_reckoning[0]
-    for k in range(1, len(result.records)):
-        prev = result.dead_reckoning[k - 1]
-        U = SE2.from_array(prev).between(SE2.from_array(result.dead_reckoning[k]))
+    D = result.dead_reckoning  # built once: the property makes the (K, 3) array from the records each time
+    X = D[0]
+    for k in range(1, len(D)):
+        U = SE2.from_array(D[k - 1]).between(SE2.from_array(D[k]))
         X, F, J_U = motion(X, U.as_array(), jacobians=True)
         cov = F @ cov @ F.T + J_U @ noise.covariance(U) @ J_U.T
     return float(2 * np.sqrt(np.trace(cov[:2, :2])))

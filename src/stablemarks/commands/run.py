@@ -65,7 +65,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from ..io.results import write_run
+    from ..io.results import LogWriter, write_run
     from ..io.sources import open_sequence
     from ..io.trajectory import write_kitti
     from ..localizer import Localizer
@@ -113,8 +113,9 @@ def run(args) -> int:
             rrd = stack.enter_context(RerunRecorder(args.save_rrd, source, config))
             observers.append(rrd)
         with frame_progress(console, f"{source.name}: {len(source)} frames", len(source)) as progress:
-            result = run_online(source, localizer, observers=observers, progress=progress)
-    paths = write_run(out, result, config)
+            log = stack.enter_context(LogWriter(out / "log.jsonl"))  # streamed: an interrupted run keeps its log
+            result = run_online(source, localizer, observers=[*observers, log], progress=progress, keep="poses")
+    paths = write_run(out, result, config, log=log.path)
     if args.kitti:
         cam = source.camera
         paths["kitti"] = write_kitti(out / "trajectory.kitti", result.poses, [r.pan for r in result.records],

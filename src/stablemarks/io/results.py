@@ -1,4 +1,5 @@
-"""Writing per-frame landmark results: ``landmarks.csv`` and ``landmarks.json`` (metres, map frame)."""
+"""Writing results: per-frame landmark results (``landmarks.csv``, ``landmarks.json``; metres, map frame),
+an on-line run's folder (:func:`write_run`) and its per-frame log streamed while it runs (:class:`LogWriter`)."""
 
 from __future__ import annotations
 
@@ -80,19 +81,63 @@ def _atomic_text(path: Path, text: str) -> None:
     tmp.replace(path)
 
 
-def write_run(out_dir: str | Path, result, config=None) -> dict[str, Path]:
+def log_line(record) -> str:
+    """One frame's line of ``log.jsonl``: its :class:`~stablemarks.localizer.FrameRecord` as JSON."""
+    return json.dumps(record.to_dict()) + "\n"
+
+
+class LogWriter:
+    """An observer of :func:`stablemarks.online.run_online` writing ``log.jsonl`` as the run goes: one JSON
+    line per frame (:func:`log_line`), flushed after each, so that an interrupted run keeps the log of the
+    frames it did and the loop need not hold the records (``run_online(..., keep="poses")``).
+
+    A context manager: ``with LogWriter(out / "log.jsonl") as log: run_online(..., observers=[log])``. The
+    file is written in place (no temporary file: what is there when the run stops is the log so far).
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.frames = 0
+        self._fh = None
+
+    def __enter__(self) -> LogWriter:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh = self.path.open("w", encoding="utf-8")
+        return self
+
+    def __call__(self, frame, est, localizer) -> None:
+        if self._fh is None:
+            raise RuntimeError("LogWriter: use it as a context manager (with LogWriter(path) as log: ...)")
+        self._fh.write(log_line(est.record))
+        self._fh.flush()
+        self.frames += 1
+
+    def __exit__(self, *exc) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+def write_run(out_dir: str | Path, result, config=None, *, log: str | Path | None = None) -> dict[str, Path]:
     """Write an on-line run's results (REP-103/105: map frame; planar covariance over x, y, yaw):
 
     ``trajectory.tum`` (the estimate), ``dead_reckoning.tum`` (odometry alone, same stamps),
     ``groundtruth.tum`` when the truth is known, ``landmarks.yaml`` (the landmark map with covariances,
     loadable as prior landmarks with ``--prior-landmarks``), ``log.jsonl`` (one line per frame) and
     ``config.yaml`` (the resolved configuration).
+
+    ``log``: the ``log.jsonl`` a :class:`LogWriter` already wrote during the run (it is listed, not written
+    again; the result may then hold a :class:`~stablemarks.online.PoseRecord` per frame). Without it the log
+    is written from ``result.records``, which must be whole :class:`~stablemarks.localizer.FrameRecord` objects.
     """
     import yaml
 
     from ..localizer import landmark_map_document
     from .trajectory import write_tum
 
+    if log is None and any(not hasattr(r, "to_dict") for r in result.records):
+        raise ValueError("write_run: the run kept only its poses (keep='poses'): stream its log with LogWriter and "
+                         "pass log=")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {}
@@ -108,8 +153,11 @@ def write_run(out_dir: str | Path, result, config=None) -> dict[str, Path]:
     doc = landmark_map_document(result.ekf, result.method)
     _atomic_text(out / "landmarks.yaml", yaml.safe_dump(doc, sort_keys=False))
     paths["landmarks"] = out / "landmarks.yaml"
-    _atomic_text(out / "log.jsonl", "".join(json.dumps(r.to_dict()) + "\n" for r in result.records))
-    paths["log"] = out / "log.jsonl"
+    if log is None:
+        _atomic_text(out / "log.jsonl", "".join(log_line(r) for r in result.records))
+        paths["log"] = out / "log.jsonl"
+    else:
+        paths["log"] = Path(log)
     if config is not None:
         _atomic_text(out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
         paths["config"] = out / "config.yaml"

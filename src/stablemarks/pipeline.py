@@ -39,12 +39,12 @@ from .vision.area_stereo import (
     _STEP,
     DisparityResult,
     SADConfig,
-    _gray8,
     _planning_runs,
     _region_runs,
     _xsobel,
     compute_disparity,
-    compute_disparity_regions,
+    prepare_pair,
+    regions_on_prepared,
 )
 from .vision.filter import filter_pairs
 from .vision.segment_stereo import SegmentPairs, match_segments
@@ -233,14 +233,18 @@ class RegionDisparity:
     :meth:`valid_columns` enough to give that answer itself.
     """
 
-    def __init__(self, left8: np.ndarray, right8: np.ndarray, sad: SADConfig, left=None, right=None):
+    def __init__(self, left8: np.ndarray, right8: np.ndarray, sad: SADConfig, left=None, right=None, *,
+                 sobel: tuple[np.ndarray, np.ndarray] | None = None):
         """``left8``, ``right8``: the (H, W) uint8 pair; ``left``, ``right``: the pixels to compute first, (N, 4)
-        rectangles ``(row0, row1, col0, col1)`` or (H, W) bool masks (None: none)."""
-        H, W = left8.shape
-        self.left8, self.right8, self.sad = left8, right8, sad
+        rectangles ``(row0, row1, col0, col1)`` or (H, W) bool masks (None: none); ``sobel``: the pair's x-Sobel
+        derivatives if already computed (``cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3)``). The pair is prefiltered
+        once (:func:`~stablemarks.vision.area_stereo.prepare_pair`): later computations read only that, not
+        ``left8``, ``right8``."""
+        H, W = np.shape(left8)
+        self.sad = sad
+        self._prep = prepare_pair(left8, right8, sad, *(sobel or (None, None)))
         empty = np.zeros((0, 4), np.int64)
-        res = compute_disparity_regions(left8, right8, sad, empty if left is None else left,
-                                        empty if right is None else right)
+        res = regions_on_prepared(self._prep, empty if left is None else left, empty if right is None else right)
         self.calls = 1
         self._images = (res.left, res.right)
         self._valid = res.valid
@@ -270,11 +274,9 @@ class RegionDisparity:
                 for m, done in zip((left, right), self.done, strict=True)]
         if not (need[0].any() or need[1].any()):
             return False
-        res = compute_disparity_regions(self.left8, self.right8, self.sad, need[0], need[1])
+        # written in place: the kernel writes exactly the requested pixels, the others stay NaN / False
+        regions_on_prepared(self._prep, need[0], need[1], out=(self._images[0], self._images[1], self._valid))
         self.calls += 1
-        np.copyto(self._images[0], res.left, where=need[0])
-        np.copyto(self._valid, res.valid, where=need[0])
-        np.copyto(self._images[1], res.right, where=need[1])
         for image in (0, 1):
             self.done[image][need[image]] = True
         self._found = [None, None]
@@ -305,8 +307,7 @@ class RegionDisparity:
         key = (image, c)
         if key in self._possible:
             return self._possible[key]
-        img = self.left8 if image == 0 else self.right8
-        H, W = img.shape
+        H, W = self.shape
         b = self.sad.block_size
         r = b // 2
         out = np.zeros(H, bool)
@@ -314,9 +315,8 @@ class RegionDisparity:
         if H > 2 * r and tex_min <= 0:
             out[r : H - r] = True
         elif H > 2 * r:
-            x0 = max(0, c - r - 1)
-            sob = _xsobel(np.ascontiguousarray(img[:, x0 : min(W, c + r + 2)]))
-            window = np.minimum(np.abs(sob[:, c - r - x0 : c + r + 1 - x0].astype(np.int64)), 255).sum(axis=1)
+            asat = self._prep.asat_left if image == 0 else self._prep.asat_right  # min(|Sobel_x|, 255)
+            window = asat[:, c - r : c + r + 1].sum(axis=1, dtype=np.int64)
             sums = np.concatenate([[0], np.cumsum(window)])
             rows = np.arange(r, H - r)
             out[r : H - r] = (sums[rows + r + 1] - sums[rows - r]) >= tex_min
@@ -486,13 +486,14 @@ def run_front_end(left: np.ndarray, right: np.ndarray, config: Config = Config()
     check_pair(left, right)
     t = {}
     t0 = time.perf_counter()
-    seg_l = extract_vertical_segments(left, config.segments)
-    seg_r = extract_vertical_segments(right, config.segments)
+    sobel = _pair_sobel(left, right)  # the segments' gradient and the SAD prefilter's: computed once
+    seg_l = extract_vertical_segments(left, config.segments, sobel=None if sobel is None else sobel[0])
+    seg_r = extract_vertical_segments(right, config.segments, sobel=None if sobel is None else sobel[1])
     t1 = time.perf_counter()
     pairs = match_segments(seg_l, seg_r, config.matching)
     t2 = time.perf_counter()
     f = config.filter
-    disp, lazy = front_disparity(left, right, config, regions, pairs, seg_l)
+    disp, lazy = front_disparity(left, right, config, regions, pairs, seg_l, sobel=sobel)
     t3 = time.perf_counter()
     kept = filter_pairs(pairs, seg_l, disp.left, disp.valid, tolerance=f.tolerance, min_support=f.min_support,
                         search_radius=f.search_radius)
@@ -501,18 +502,28 @@ def run_front_end(left: np.ndarray, right: np.ndarray, config: Config = Config()
     return FrontEnd(seg_l, seg_r, pairs, np.asarray(kept, dtype=bool), disp, t, lazy, regions)
 
 
+def _pair_sobel(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The x-Sobel derivatives of a uint8 pair (what :func:`extract_vertical_segments` and the SAD prefilter both
+    compute, the same 3×3 kernel and reflected borders), None for other images (each computes its own)."""
+    if left.dtype != np.uint8 or right.dtype != np.uint8 or min(left.shape) < 3:
+        return None
+    return _xsobel(np.ascontiguousarray(left)), _xsobel(np.ascontiguousarray(right))
+
+
 def front_disparity(left: np.ndarray, right: np.ndarray, config: Config, regions: Regions | None, pairs: SegmentPairs,
-                    left_segments: Segments) -> tuple[DisparityResult, RegionDisparity | None]:
+                    left_segments: Segments, sobel: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> tuple[DisparityResult, RegionDisparity | None]:
     """The front end's SAD (:func:`run_front_end`): the disparity images and, when computed in regions, the
-    :class:`RegionDisparity` holding them (None when dense)."""
+    :class:`RegionDisparity` holding them (None when dense). ``sobel``: the pair's x-Sobel derivatives if
+    already computed (:func:`_pair_sobel`)."""
     if regions is None or config.sad.backend != "numba":
-        return compute_disparity(left, right, config.sad), None
+        return compute_disparity(left, right, config.sad, sobel=sobel), None
     want_l = np.concatenate([np.asarray(regions.left, np.int64).reshape(-1, 4),
                              pair_bands(pairs, left_segments, config.filter.search_radius)])
     want_r = np.asarray(regions.right, np.int64).reshape(-1, 4)
     if region_work(want_l, want_r, config.sad, np.shape(left)) >= DENSE_ABOVE:
-        return compute_disparity(left, right, config.sad), None
-    lazy = RegionDisparity(np.array(_gray8(left, "left")), np.array(_gray8(right, "right")), config.sad, want_l, want_r)
+        return compute_disparity(left, right, config.sad, sobel=sobel), None
+    lazy = RegionDisparity(left, right, config.sad, want_l, want_r, sobel=sobel)
     return lazy.result, lazy
 
 

@@ -56,6 +56,9 @@ __all__ = [
     "SADConfig",
     "compute_disparity",
     "compute_disparity_regions",
+    "PreparedPair",
+    "prepare_pair",
+    "regions_on_prepared",
     "sad_cost_volume",
     "sad_reference",
 ]
@@ -218,7 +221,8 @@ class DisparityResult:
         return float(np.mean(np.abs(self.left[scored] - truth[scored]) > threshold))
 
 
-def compute_disparity(left: np.ndarray, right: np.ndarray, config: SADConfig = SADConfig()) -> DisparityResult:
+def compute_disparity(left: np.ndarray, right: np.ndarray, config: SADConfig = SADConfig(), *,
+                      sobel: tuple[np.ndarray, np.ndarray] | None = None) -> DisparityResult:
     """Left- and right-reference disparity images of a rectified pair by SAD matching (Eq 2).
 
     Parameters
@@ -230,10 +234,11 @@ def compute_disparity(left: np.ndarray, right: np.ndarray, config: SADConfig = S
     -------
     DisparityResult with NaN wherever a test failed or the window or disparity range does not fit.
     Raises :class:`ImageError` for images that are not 2-D, of different shapes, or of another type.
+    ``sobel``: the images' x-Sobel derivatives if already computed (``cv2.Sobel(img, cv2.CV_16S, 1, 0,
+    ksize=3)`` of the 8-bit images), else computed here.
     """
     left8, right8 = _pair(left, right)
-    sobel_left = _xsobel(left8)
-    sobel_right = _xsobel(right8)
+    sobel_left, sobel_right = (_xsobel(left8), _xsobel(right8)) if sobel is None else sobel
     if config.backend == "opencv":
         return _opencv_disparity(left8, right8, _textured(sobel_left, config), _textured(sobel_right, config), config)
     every = _all_runs(*left8.shape)
@@ -291,6 +296,19 @@ def compute_disparity_regions(
         right_out = np.where(_runs_mask(*right_runs, shape), res.right, np.float32(np.nan))
         return _frozen(np.where(valid, res.left, np.float32(np.nan)), right_out, valid)
     return _run_kernel(left8, right8, sobel_left, sobel_right, config, left_runs, right_runs)
+
+
+def regions_on_prepared(prepared: PreparedPair, regions, right_regions=None, out=None) -> DisparityResult:
+    """:func:`compute_disparity_regions` on a pair prepared once (:func:`prepare_pair`, numba backend): the same
+    values at the requested pixels. ``out``: None (fresh frozen outputs, NaN / False elsewhere) or the
+    writable (left, right, valid) (H, W) arrays to write the requested pixels into, leaving the others as they
+    are."""
+    if prepared.config.backend != "numba":
+        raise ConfigError(expected("the 'numba' backend", prepared.config.backend, where="regions_on_prepared"))
+    shape = prepared.shape
+    left_runs = _all_runs(*shape) if regions is None else _region_runs(regions, shape, "regions")
+    right_runs = _no_runs(shape[0]) if right_regions is None else _region_runs(right_regions, shape, "right_regions")
+    return _run_prepared(prepared, left_runs, right_runs, out=out)
 
 
 def _pair(left, right) -> tuple[np.ndarray, np.ndarray]:
@@ -1076,22 +1094,83 @@ def _prepare(image8, sobel, cap, pad_l, pad_r, texture):  # pragma: no cover - n
     return out, asat
 
 
+@dataclass(frozen=True, eq=False)
+class PreparedPair:
+    """A pair as the numba kernel reads it (:func:`prepare_pair`), to be matched in several calls
+    (:func:`compute_disparity_regions` with ``prepared``) without preparing it again.
+
+    ``left`` (H, W) and ``right_pad`` (H, pad_l + W + pad_r) int16: the prefiltered images (the right one
+    zero-padded); ``asat_left``, ``asat_right`` (H, W) uint8: ``min(|Sobel_x|, 255)`` of the images, which
+    the texture test sums ((1, 1) when there is no texture test); ``shape`` (H, W); ``config`` the
+    matching parameters it was prepared for. Empty images when the window does not fit (no pixel is
+    ever valid then).
+    """
+
+    left: np.ndarray
+    right_pad: np.ndarray
+    asat_left: np.ndarray
+    asat_right: np.ndarray
+    shape: tuple[int, int]
+    config: SADConfig
+
+
+def prepare_pair(left, right, config: SADConfig = SADConfig(), sobel_left=None, sobel_right=None) -> PreparedPair:
+    """The pair (as :func:`compute_disparity` takes it) prefiltered once for any number of
+    :func:`compute_disparity_regions` calls with the same ``config``; ``sobel_left``, ``sobel_right``: the
+    images' x-Sobel derivatives (int16, 3×3, borders reflected: ``cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3)``)
+    if already computed (None: computed here)."""
+    left8, right8 = _pair(left, right)
+    return _prepared(left8, right8, sobel_left, sobel_right, config)
+
+
+def _prepared(left8, right8, sobel_left, sobel_right, config: SADConfig) -> PreparedPair:
+    n_rows, n_cols = left8.shape
+    r = config.block_size // 2
+    if not (n_rows > 2 * r and n_cols > 2 * r):
+        none = np.zeros((0, 0), np.int16)
+        return PreparedPair(none, none, none.astype(np.uint8), none.astype(np.uint8), (n_rows, n_cols), config)
+    pad_l, pad_r, _ = _padding(config)
+    b = config.block_size
+    tex_min = int(np.ceil(8.0 * config.texture_threshold * b * b))
+    cap = config.prefilter_cap if config.prefilter == "xsobel" else 0
+    need_sobel = cap > 0 or tex_min > 0
+    if need_sobel and sobel_left is None:
+        sobel_left = _xsobel(left8)
+    if need_sobel and sobel_right is None:
+        sobel_right = _xsobel(right8)
+    if not need_sobel:
+        sobel_left = sobel_right = np.zeros((1, 1), np.int16)  # not read
+    left, asat_left = _prepare(left8, sobel_left, cap, 0, 0, tex_min > 0)
+    right_pad, asat_right = _prepare(right8, sobel_right, cap, pad_l, pad_r, tex_min > 0)
+    return PreparedPair(left, right_pad, asat_left, asat_right, (n_rows, n_cols), config)
+
+
 def _run_kernel(left8, right8, sobel_left, sobel_right, config: SADConfig, left_runs, right_runs, volume=None):
     """:func:`_sad_kernel` on a pair of (H, W) uint8 images and their x-Sobel derivatives; ``*_runs``: (ptr, runs)
     of requested pixels (:func:`_mask_runs`); ``volume``: see :func:`_sad_kernel`. Returns the frozen
     :class:`DisparityResult` (NaN / False outside the requested pixels)."""
-    n_rows, n_cols = left8.shape
-    out_left = np.full((n_rows, n_cols), np.nan, np.float32)
-    out_right = np.full((n_rows, n_cols), np.nan, np.float32)
-    valid = np.zeros((n_rows, n_cols), bool)
+    prep = _prepared(left8, right8, sobel_left, sobel_right, config)
+    return _run_prepared(prep, left_runs, right_runs, volume)
+
+
+def _run_prepared(prep: PreparedPair, left_runs, right_runs, volume=None, out=None) -> DisparityResult:
+    """:func:`_sad_kernel` on a prepared pair. ``out``: None (fresh outputs, frozen on the way out) or the
+    (left, right, valid) arrays to write the requested pixels into (left unchanged elsewhere; returned as
+    they are)."""
+    config = prep.config
+    n_rows, n_cols = prep.shape
+    if out is None:
+        out_left = np.full((n_rows, n_cols), np.nan, np.float32)
+        out_right = np.full((n_rows, n_cols), np.nan, np.float32)
+        valid = np.zeros((n_rows, n_cols), bool)
+    else:
+        out_left, out_right, valid = out
     r = config.block_size // 2
     if n_rows > 2 * r and n_cols > 2 * r:
-        pad_l, pad_r, off = _padding(config)
+        _, _, off = _padding(config)
         b = config.block_size
         tex_min = int(np.ceil(8.0 * config.texture_threshold * b * b))  # integer window sums: the same test
-        cap = config.prefilter_cap if config.prefilter == "xsobel" else 0
-        left, asat_left = _prepare(left8, sobel_left, cap, 0, 0, tex_min > 0)
-        right_pad, asat_right = _prepare(right8, sobel_right, cap, pad_l, pad_r, tex_min > 0)
+        left, right_pad, asat_left, asat_right = prep.left, prep.right_pad, prep.asat_left, prep.asat_right
         _sad_kernel(
             left, right_pad, asat_left, asat_right, tex_min,
             np.zeros(0, np.uint16 if 255 * b * b <= np.iinfo(np.uint16).max else np.int32), r, config.min_disparity,
@@ -1103,6 +1182,8 @@ def _run_kernel(left8, right8, sobel_left, sobel_right, config: SADConfig, left_
             np.zeros(config.num_disparities, _cost_dtype(config)), out_left, out_right, valid,
             np.zeros((0, 0, 0), np.int64) if volume is None else volume,
         )  # fmt: skip
+    if out is not None:
+        return DisparityResult(out_left, out_right, valid)
     return _frozen(out_left, out_right, valid)
 
 

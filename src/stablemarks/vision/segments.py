@@ -222,13 +222,16 @@ class Segments:
         )  # fmt: skip
 
 
-def extract_vertical_segments(image: np.ndarray, config: SegmentConfig = SegmentConfig()) -> Segments:
+def extract_vertical_segments(image: np.ndarray, config: SegmentConfig = SegmentConfig(), *,
+                              sobel: np.ndarray | None = None) -> Segments:
     """Vertical line segments of a grayscale image (paper Sec 2.1), sorted by column ``u``.
 
     Parameters
     ----------
     image : (H, W) uint8 or float grayscale, H, W >= 3, finite.
     config : detection parameters.
+    sobel : for a uint8 ``image``, its x-Sobel derivative if already computed (``cv2.Sobel(image,
+        cv2.CV_16S, 1, 0, ksize=3)``, (H, W) int16); ignored for float images.
 
     Returns
     -------
@@ -245,7 +248,10 @@ def extract_vertical_segments(image: np.ndarray, config: SegmentConfig = Segment
     if img.shape[0] < 3 or img.shape[1] < 3:
         raise ImageError(expected("an image of at least 3x3 pixels", img.shape, where="image"))
     if img.dtype == np.uint8:
-        gx = cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3)  # |gx| <= 4 * 255
+        if sobel is not None and (np.shape(sobel) != img.shape or np.asarray(sobel).dtype != np.int16):
+            raise ImageError(expected(f"an int16 x-Sobel of the image's shape {img.shape}",
+                                      f"{np.asarray(sobel).dtype} {np.shape(sobel)}", where="sobel"))
+        gx = cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3) if sobel is None else sobel  # |gx| <= 4 * 255
         threshold = np.int16(min(np.ceil(config.gradient_threshold), 32767))  # integer compare vectorizes
     elif np.issubdtype(img.dtype, np.floating):
         if not np.all(np.isfinite(img)):

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from stablemarks.bench import long_run, memory_profile
+from stablemarks.bench import LapSource, long_run, memory_profile
+from stablemarks.sim.source import SimulatedSource
 
 
 def test_long_run_drives_the_loop_again_until_it_has_the_frames():
@@ -18,10 +19,76 @@ def test_long_run_drives_the_loop_again_until_it_has_the_frames():
     assert np.sum(np.linalg.norm(xy - xy_one[0], axis=1) < 1e-9) >= 3
 
 
-def test_memory_profile_reports_peaks_and_growth():
-    out = memory_profile(4, "loop")
-    assert out["frames"] == 4 and out["peak_mb_max"] > 0 and out["record_kb_per_frame"] > 0
-    assert set(out) >= {"held_kb_per_frame", "landmarks_final", "peak_mb_first_quarter", "peak_mb_last_quarter"}
+def test_lap_source_makes_the_frames_of_the_long_run_one_at_a_time():
+    """``LapSource`` streams what ``SimulatedSource(long_run(...))`` holds: the same true poses and dead
+    reckoning (odometry noise drawn in the same order) across the laps, the same pans and images."""
+    import itertools
+
+    lazy = LapSource("loop", 1000)
+    run = long_run("loop", 1000)
+    assert len(lazy) == 1000 and len(run) > len(lazy.run)  # the source holds one pass of the path, not 1000 frames
+    for k, (pose, believed) in enumerate(itertools.islice(lazy.truth(), 1000)):
+        assert np.array_equal(pose.as_array(), run.poses[k].as_array()), k
+        assert np.array_equal(believed.as_array(), run.dead_reckoning[k].as_array()), k
+    held = SimulatedSource(run, frames=1000)
+    for a, b in zip(itertools.islice(lazy, 3), itertools.islice(held, 3), strict=True):
+        assert (a.index, a.stamp, a.pan) == (b.index, b.stamp, b.pan)
+        for name in ("left", "right", "odometry", "true_pose"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    lazy.steer(lambda odometry: 0.25)  # steered, like the simulator under the localizer
+    assert [f.pan for f in itertools.islice(lazy, 2)] == [0.25, 0.25]
+    assert len(LapSource("loop", 3)) == 3
+
+
+def test_memory_profile_reports_both_windows():
+    """The soak's figures for the first and last window: time untraced, memory traced, landmarks."""
+    seen = []
+    out = memory_profile(12, "loop", progress=lambda k, n: seen.append((k, n)))
+    assert seen == [(k, 12) for k in range(1, 13)]
+    assert out["frames"] == 12 and out["window"] == 6 and out["seconds"] > 0
+    for name in ("first", "last"):
+        w = out[name]
+        assert w["step_ms"] > 0 and w["frame_ms"] >= w["step_ms"] and w["rss_mb"] > 0
+        assert w["traced_peak_mb_max"] >= w["traced_peak_mb"] > 0 and w["landmarks_max"] >= 1
+        assert np.isfinite(w["held_kb_per_frame"])  # three traced frames: a slope
+    assert out["first"]["frames"] == [0, 6] and out["last"]["frames"] == [6, 12]
+    assert np.isfinite(out["rss_growth_kb_per_frame"]) and out["landmarks_final"] >= 1
+
+
+def test_bench_command_takes_a_10000_frame_soak(monkeypatch, tmp_path, capsys):
+    """``bench --memory-frames 10000`` is within the bounds; the soak's table is printed and its figures written
+    as strict JSON (a slope that could not be fitted is null). The measurements themselves are faked here."""
+    import json
+    import math
+
+    import stablemarks.bench as bench
+    from stablemarks.cli import main
+
+    keys = ("stereobm", "regions", "segments", "matching", "disparity", "filter", "planes", "landmarks", "ekf",
+            "front_end", "pipeline", "disparity_alone", "disparity_dense", "disparity_dense_in_pipeline",
+            "pipeline_dense")
+    stages = {f"{k}_ms": 1.0 for k in keys} | {"pipeline_fps": 1000.0, "pipeline_dense_fps": 1000.0,
+                                                "ratio_pipeline_vs_stereobm": 1.0}
+    window = {"frames": [0, 1000], "step_ms": 20.0, "frame_ms": 130.0, "rss_mb": 300.0, "traced_peak_mb": 48.0,
+              "traced_peak_mb_max": 52.0, "held_kb_per_frame": math.nan, "landmarks": 14.0, "landmarks_max": 16}
+    asked = []
+
+    def soak(frames, progress=None):
+        asked.append(frames)
+        progress(frames, frames)
+        return {"scenario": "loop", "frames": frames, "window": 1000, "seconds": 1800.0, "seconds_per_frame": 0.18,
+                "first": window, "last": window | {"frames": [9000, 10000]}, "rss_growth_kb_per_frame": 0.5,
+                "rss_mb_end": 305.0, "landmarks_final": 15, "landmarks_dropped": 40}
+
+    monkeypatch.setattr(bench, "stage_times", lambda repeats: stages)
+    monkeypatch.setattr(bench, "ekf_vs_filterpy", lambda sizes: {"skipped": "faked"})
+    monkeypatch.setattr(bench, "memory_profile", soak)
+    assert main(["bench", "--memory-frames", "10000", "--json", str(tmp_path / "b.json")]) == 0
+    assert asked == [10000]
+    printed = " ".join(capsys.readouterr().out.split())  # the console wraps long lines
+    assert "frames 9000–9999" in printed and "10000 frames in 30.0 min" in printed
+    doc = json.loads((tmp_path / "b.json").read_text())
+    assert doc["memory"]["first"]["held_kb_per_frame"] is None and doc["memory"]["landmarks_final"] == 15
 
 
 def test_stage_times_time_the_pipeline_as_the_localizer_runs_it():

@@ -16,20 +16,27 @@ shared, so ratios to a reference measured in the same run are the figures to rea
   and both pipelines on frames across the lab run (``run_*``: the regions vary with the view).
 - The EKF update against filterpy's ``ExtendedKalmanFilter`` doing the same update on the same numbers,
   for 10 to 2000 landmarks (``ratio_ekf_vs_filterpy_1000``, ``max_abs_diff``).
-- Memory: traced allocation peak per frame over a run of the on-line loop, to show it stays flat.
+- The soak (``--memory-frames N``, :func:`memory_profile`): N frames of the on-line loop on the ``loop``
+  scenario driven lap after lap, made frame by frame (:class:`LapSource`) with no per-frame record kept;
+  time per frame, resident memory (RSS) per frame, traced allocations (``tracemalloc``, in half of each
+  window only: it slows Python about twofold) and the landmark count, in the first and the last window of
+  ``window`` frames (1000), to show that time and memory stay flat over a long run.
 """
 
 from __future__ import annotations
 
-import pickle
+import os
 import statistics
+import sys
 import time
 import tracemalloc
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
+
+from .sim.source import SimulatedSource
 
 
 def wall_times(fn: Callable[[], object], repeats: int = 15, warmup: int = 2) -> list[float]:
@@ -247,7 +254,8 @@ def ekf_vs_filterpy(sizes=(10, 100, 500, 1000, 2000), m: int = 6, repeats: int =
 
 def long_run(scenario: str, frames: int):
     """The simulated run of ``scenario`` with its path driven again and again until it has at least ``frames``
-    frames (for a path that ends where it starts, like the ``loop``'s)."""
+    frames (for a path that ends where it starts, like the ``loop``'s). It holds every frame's truth (poses,
+    odometry, pans: all planned up front); :class:`LapSource` makes the same frames one at a time."""
     import math
     from dataclasses import replace
 
@@ -262,48 +270,185 @@ def long_run(scenario: str, frames: int):
     return run
 
 
-def memory_profile(frames: int = 200, scenario: str = "loop") -> dict:
-    """Traced memory of each frame of the on-line loop on a simulated scenario, repeated along its path
-    until it has ``frames`` frames (the ``loop`` closes on itself, so its laps continue seamlessly).
+class LapSource(SimulatedSource):
+    """``frames`` frames of a scenario's path driven lap after lap, made one at a time: the frames of
+    ``SimulatedSource(long_run(scenario, frames), frames=frames)`` — the same true poses, odometry noise,
+    dead reckoning, pans and images — without planning or holding the whole run. It holds one lap's true
+    poses and the current dead reckoning; the odometry noise is drawn from the run's odometry stream in
+    frame order (as :func:`~stablemarks.sim.run.simulate_run` draws it), and each frame's images from its
+    own stream. The head follows the localizer's pan commands (steerable); unsteered, the scenario's pan
+    policy from dead reckoning, as the simulated run's pans."""
 
-    Returns the median per-frame peak in the first and last quarter, the largest peak, the landmark count in
-    both quarters, and the growth of the memory held between frames (``held_kb_per_frame``, a straight-line
-    fit over the second half of the run): the per-frame records the loop returns (``FrameRecord``, for the
-    log) are the only thing that should grow besides the landmark state.
+    def __init__(self, scenario, frames: int, seed: int | None = None, stamp_step: float = 0.5):
+        from .sim.run import simulate_run
+        from .sim.scenario import load_scenario
+
+        sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+        first = simulate_run(sc, seed)  # one pass of the path: the start, the seed, the source's settings
+        super().__init__(first, stamp_step=stamp_step)
+        again = self._lap(first.poses[-1]) if len(first) > 1 else []
+        # a path that does not move again from where it ends (or no path) has only its first pass
+        self._n = int(frames) if len(again) > 1 else min(int(frames), len(first))
+
+    def _lap(self, start):
+        from .motion import plan_path
+
+        plan = self.scenario.robot
+        return plan_path(start, plan.path, plan.frame_spacing, plan.frame_turn) if plan.path else [start]
+
+    def truth(self) -> Iterator[tuple]:
+        """``(true pose, dead reckoning)`` (SE2) of every frame, lap after lap."""
+        plan = self.scenario.robot
+        rng = np.random.default_rng(np.random.SeedSequence(self.run.seed, spawn_key=(0,)))
+        pose = believed = plan.start
+        yield pose, believed
+        while True:
+            lap = self._lap(pose)
+            if len(lap) < 2:
+                return
+            for a, b in zip(lap[:-1], lap[1:], strict=True):
+                believed = believed @ plan.odometry.sample(a.between(b), rng)
+                yield b, believed
+            pose = lap[-1]
+
+    def _policy_pan(self, believed, previous: float | None) -> float:
+        from .motion import look_at_free_edges
+
+        sc, pan = self.scenario, self.scenario.robot.pan
+        if pan.policy == "fixed":
+            return float(np.clip(pan.angle, *sc.pan_limits))
+        return look_at_free_edges(self.world_map, self.camera, believed.as_array(), limits=sc.pan_limits,
+                                  default=pan.angle if previous is None else previous)
+
+    def frame(self, k: int, pan: float | None = None):
+        raise NotImplementedError("LapSource makes its frames in order: iterate over it")
+
+    def __iter__(self):
+        from .frames import Frame
+
+        previous = None
+        for k, (pose, believed) in enumerate(self.truth()):
+            if k >= len(self):
+                return
+            odometry = believed.as_array()
+            if self._pan_for is not None:
+                pan = float(self._pan_for(odometry))
+            else:
+                pan = previous = self._policy_pan(believed, previous)
+            sim = self.renderer.render(pose.as_array(), pan, self.run.frame_rng(k))
+            yield Frame(k, k * self.stamp_step, sim.left, sim.right, odometry, pan, true_pose=pose.as_array(),
+                        truth=sim.truth)
+
+
+
+def rss_mb() -> float:
+    """The process's resident memory now [MB] (``/proc/self/statm``); where there is none, its peak so far
+    (``ru_maxrss``), or NaN."""
+    try:
+        with open("/proc/self/statm", "rb") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, IndexError, AttributeError):
+        pass
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - Windows
+        return float("nan")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # pragma: no cover - not Linux
+    return peak / 1e6 if sys.platform == "darwin" else peak / 1e3  # pragma: no cover
+
+
+def _slope(y: np.ndarray) -> float:
+    """Least-squares slope of ``y`` per sample (NaN with fewer than 3)."""
+    return float(np.polyfit(np.arange(len(y)), y, 1)[0]) if len(y) >= 3 else float("nan")
+
+
+def _median(y) -> float:
+    return float(np.median(y)) if len(y) else float("nan")
+
+
+def memory_profile(frames: int = 10_000, scenario: str = "loop", window: int = 1000,
+                   progress: Callable[[int, int], None] | None = None) -> dict:
+    """The soak: ``frames`` frames of the on-line loop on ``scenario`` driven lap after lap (the ``loop``
+    closes on itself, so its laps continue seamlessly), streamed: frames made one at a time
+    (:class:`LapSource`), no per-frame record kept (``run_online(..., keep="nothing")``), the measurements in
+    preallocated arrays.
+
+    Two windows of ``w = min(window, frames // 2)`` frames, the first and the last. In the first half of each
+    window, untraced: the median wall time per frame of the localizer's step (``step_ms``) and with the
+    frame's rendering (``frame_ms``), and the resident memory (``rss_mb``). In the second half, under
+    ``tracemalloc`` (about twice as slow, hence not timed): the median and largest traced peak per frame
+    (``traced_peak_mb``, ``traced_peak_mb_max``) and the growth of the memory held between frames
+    (``held_kb_per_frame``, a straight-line fit). The landmark count (median and largest) over the window.
+    Over the run: the RSS growth between the windows (``rss_growth_kb_per_frame``), the final landmark count,
+    the landmarks dropped (their last estimates are kept: ``retired``) and the total wall time.
+    ``progress(k, n)`` after each frame.
     """
     from .online import run_online
-    from .sim.source import SimulatedSource
 
-    run = long_run(scenario, frames)
-    n = min(frames, len(run))
-    source = SimulatedSource(run, frames=n)
-    peaks, held = [], []
+    source = LapSource(scenario, frames)
+    n = len(source)
+    w = max(1, min(int(window), n // 2))
+    timed = max(1, w // 2)  # the untraced first part of each window
+    windows = {"first": 0, "last": n - w}
+    traced_at = {start + timed for start in windows.values() if timed < w}
+    stop_at = {start + w for start in windows.values() if timed < w}
+    step = np.full(n, np.nan)
+    wall = np.full(n, np.nan)
+    rss = np.full(n, np.nan)
+    landmarks = np.zeros(n, dtype=int)
+    peak = np.full(n, np.nan)
+    held = np.full(n, np.nan)
+    clock = [time.perf_counter()]
 
-    def progress(k, total):
-        current, peak = tracemalloc.get_traced_memory()
-        peaks.append(peak / 1e6)
-        held.append(current / 1e3)
-        tracemalloc.reset_peak()
+    def measure(frame, est, localizer):
+        k = frame.index
+        now = time.perf_counter()
+        wall[k] = now - clock[0]
+        step[k] = est.record.timings.get("total", np.nan)
+        landmarks[k] = localizer.ekf.n_landmarks
+        if tracemalloc.is_tracing():
+            current, top = tracemalloc.get_traced_memory()
+            held[k], peak[k] = current / 1e3, top / 1e6
+            tracemalloc.reset_peak()
+        else:
+            rss[k] = rss_mb()
+        if k + 1 in stop_at:
+            tracemalloc.stop()
+        if k + 1 in traced_at:
+            tracemalloc.start()
+        if progress is not None:
+            progress(k + 1, n)
+        clock[0] = time.perf_counter()
 
-    tracemalloc.start()
+    t0 = time.perf_counter()
     try:
-        result = run_online(source, progress=progress)
-        record_kb = len(pickle.dumps(result.records)) / 1e3 / max(1, n)
+        result = run_online(source, observers=[measure], keep="nothing")
     finally:
-        tracemalloc.stop()
-    sizes = [r.n_landmarks for r in result.records]
-    q = max(1, n // 4)
-    half = np.arange(n // 2, n)
-    slope = float(np.polyfit(half, np.asarray(held)[half], 1)[0]) if len(half) > 2 else float("nan")
-    return {
-        "scenario": scenario,
-        "frames": n,
-        "landmarks_final": result.ekf.n_landmarks,
-        "peak_mb_first_quarter": float(np.median(peaks[1:q + 1])),
-        "peak_mb_last_quarter": float(np.median(peaks[-q:])),
-        "peak_mb_max": float(max(peaks)),
-        "landmarks_first_quarter": float(np.median(sizes[1:q + 1])),
-        "landmarks_last_quarter": float(np.median(sizes[-q:])),
-        "held_kb_per_frame": slope,
-        "record_kb_per_frame": record_kb,
-    }
+        if tracemalloc.is_tracing():
+            tracemalloc.stop()
+    seconds = time.perf_counter() - t0
+    out = {"scenario": scenario, "frames": result.n_frames, "window": w, "seconds": seconds,
+           "seconds_per_frame": seconds / max(1, result.n_frames)}
+    centres = {}
+    for name, start in windows.items():
+        t = slice(start, start + timed)
+        tr = slice(start + timed, start + w)
+        centres[name] = start + timed / 2
+        out[name] = {
+            "frames": [start, start + w],
+            "step_ms": 1000 * _median(step[t]),
+            "frame_ms": 1000 * _median(wall[t]),
+            "rss_mb": _median(rss[t]),
+            "traced_peak_mb": _median(peak[tr]),
+            "traced_peak_mb_max": float(np.max(peak[tr])) if timed < w else float("nan"),
+            "held_kb_per_frame": _slope(held[tr]),
+            "landmarks": _median(landmarks[start:start + w]),
+            "landmarks_max": int(landmarks[start:start + w].max()),
+        }
+    span = centres["last"] - centres["first"]
+    out["rss_growth_kb_per_frame"] = (1000 * (out["last"]["rss_mb"] - out["first"]["rss_mb"]) / span
+                                      if span > 0 else float("nan"))
+    out["rss_mb_end"] = rss_mb()
+    out["landmarks_final"] = result.ekf.n_landmarks
+    out["landmarks_dropped"] = len(result.retired)
+    return out

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from rich.table import Table
@@ -25,7 +26,40 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repeats", type=int, default=15, help="timed runs per stage (median; default 15)")
     p.add_argument("--sizes", default="10,100,500,1000,2000", help="landmark counts of the EKF comparison")
     p.add_argument("--memory-frames", type=int, default=0, metavar="N",
-                   help="also trace memory over N frames of the `loop` scenario, lap after lap (default: skip)")
+                   help="also soak: N frames of the `loop` scenario lap after lap, time and memory per frame in the "
+                        "first and last 1000 (10000 take about half an hour; default: skip)")
+
+
+def _plain(v):
+    """``v`` with every non-finite float as None (strict JSON: a soak too short for a slope has NaN there)."""
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def soak_table(mem: dict) -> Table:
+    """The soak's figures (:func:`stablemarks.bench.memory_profile`) in the first and the last window."""
+    first, last = mem["first"], mem["last"]
+    t = Table(title=f"soak: {mem['frames']} frames of `{mem['scenario']}` lap after lap, streamed (no record kept)")
+    t.add_column("")
+    for w in (first, last):
+        t.add_column(f"frames {w['frames'][0]}–{w['frames'][1] - 1}", justify="right")
+
+    def row(label, fmt, *keys):
+        t.add_row(label, *(fmt.format(*(w[k] for k in keys)) for w in (first, last)))
+
+    row("localizer step, median ms/frame (untraced half)", "{:.1f}", "step_ms")
+    row("with rendering the frame, median ms/frame", "{:.1f}", "frame_ms")
+    row("resident memory (RSS), median MB (untraced half)", "{:.1f}", "rss_mb")
+    row("traced peak per frame, median (max) MB (traced half)", "{:.1f} ({:.1f})", "traced_peak_mb",
+        "traced_peak_mb_max")
+    row("memory held between frames grows, kB/frame (traced)", "{:.2f}", "held_kb_per_frame")
+    row("landmarks in the filter, median (max)", "{:.0f} ({})", "landmarks", "landmarks_max")
+    return t
 
 
 def run(args) -> int:
@@ -95,18 +129,20 @@ def run(args) -> int:
             out["ratio_ekf_vs_filterpy_1000"] = ekf["ratio_ekf_vs_filterpy_1000"]
         out["max_abs_diff"] = ekf["max_abs_diff"]
     if args.memory_frames:
-        mem = memory_profile(args.memory_frames)
+        from ._report import frame_progress
+
+        with frame_progress(console, f"soak: {args.memory_frames} frames of `loop`", args.memory_frames) as progress:
+            mem = memory_profile(args.memory_frames, progress=progress)
         out["memory"] = mem
+        console.print(soak_table(mem))
         console.print(
-            f"memory over {mem['frames']} frames of `{mem['scenario']}`: traced peak per frame "
-            f"{mem['peak_mb_first_quarter']:.1f} MB (first quarter) vs {mem['peak_mb_last_quarter']:.1f} MB "
-            f"(last quarter), max {mem['peak_mb_max']:.1f} MB; landmarks {mem['landmarks_first_quarter']:.0f} → "
-            f"{mem['landmarks_last_quarter']:.0f}; memory held between frames grows "
-            f"{mem['held_kb_per_frame']:.1f} kB/frame (the per-frame records: "
-            f"{mem['record_kb_per_frame']:.1f} kB/frame)"
+            f"resident memory grows {mem['rss_growth_kb_per_frame']:.1f} kB/frame from the first window to the last "
+            f"({mem['rss_mb_end']:.0f} MB at the end); {mem['landmarks_final']} landmarks in the filter at the end, "
+            f"{mem['landmarks_dropped']} dropped on the way; {mem['frames']} frames in {mem['seconds'] / 60:.1f} min "
+            f"({1000 * mem['seconds_per_frame']:.0f} ms/frame with rendering and the traced frames)"
         )
     console.print(f"ratio_pipeline_vs_stereobm = {stages['ratio_pipeline_vs_stereobm']:.2f}")
     if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=2))
+        Path(args.json).write_text(json.dumps(_plain(out), indent=2, allow_nan=False))
         console.print(f"wrote {args.json}")
     return 0

@@ -4,6 +4,7 @@ the broken bags (missing topic, unsorted or duplicate stamps, no pairs, a calibr
 
 from __future__ import annotations
 
+import functools
 import re
 
 import cv2
@@ -43,6 +44,11 @@ class Messages:
 
     def __init__(self, ros1: bool):
         self.ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+        if "tf2_msgs/msg/TFMessage" not in self.ts.types:  # ROS 1 Noetic's store lacks it
+            from rosbags.typesys import get_types_from_msg
+
+            self.ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms",
+                                                "tf2_msgs/msg/TFMessage"))
         self.T = self.ts.types
         self.ros1 = ros1
 
@@ -51,34 +57,73 @@ class Messages:
         extra = {"seq": 0} if self.ros1 else {}
         return self.T["std_msgs/msg/Header"](stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame, **extra)
 
-    def image(self, ns: int, img: np.ndarray, encoding: str = "mono8", bigendian: bool = False, pad: int = 0):
+    def image(self, ns: int, img: np.ndarray, encoding: str = "mono8", bigendian: bool = False, pad: int = 0,
+              frame: str = "camera"):
         h, w = img.shape[:2]
         data = img.astype(img.dtype.newbyteorder(">" if bigendian else "<")).reshape(h, -1).view(np.uint8)
         step = data.shape[1] + pad
         rows = np.zeros((h, step), np.uint8)
         rows[:, : data.shape[1]] = data
-        return self.T["sensor_msgs/msg/Image"](header=self.header(ns), height=h, width=w, encoding=encoding,
+        return self.T["sensor_msgs/msg/Image"](header=self.header(ns, frame), height=h, width=w, encoding=encoding,
                                                is_bigendian=int(bigendian), step=step, data=rows.ravel())
 
-    def compressed(self, ns: int, img: np.ndarray):
+    def compressed(self, ns: int, img: np.ndarray, frame: str = "camera"):
         ok, buf = cv2.imencode(".png", img)
         assert ok
-        return self.T["sensor_msgs/msg/CompressedImage"](header=self.header(ns), format="mono8; png compressed ",
+        return self.T["sensor_msgs/msg/CompressedImage"](header=self.header(ns, frame), format="mono8; png compressed ",
                                                          data=buf.ravel())
 
-    def odometry(self, ns: int, pose):
+    def pose(self, pose):
+        """A ``geometry_msgs/Pose`` of a planar pose ``(x, y, theta)``."""
         T = self.T
         x, y, theta = pose
-        p = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-                                        orientation=T["geometry_msgs/msg/Quaternion"](
-                                            x=0.0, y=0.0, z=np.sin(theta / 2), w=np.cos(theta / 2)))
+        return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                                           orientation=T["geometry_msgs/msg/Quaternion"](
+                                               x=0.0, y=0.0, z=np.sin(theta / 2), w=np.cos(theta / 2)))
+
+    def odometry(self, ns: int, pose, frame: str = "odom"):
+        T = self.T
+        p = self.pose(pose)
         zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
         return T["nav_msgs/msg/Odometry"](
-            header=self.header(ns, "odom"), child_frame_id="base_link",
+            header=self.header(ns, frame), child_frame_id="base_link",
             pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=p, covariance=np.zeros(36)),
             twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](linear=zero,
                                                                                                 angular=zero),
                                                              covariance=np.zeros(36)))
+
+    def pose_stamped(self, ns: int, pose, frame: str = "map"):
+        return self.T["geometry_msgs/msg/PoseStamped"](header=self.header(ns, frame), pose=self.pose(pose))
+
+    def pose_with_covariance(self, ns: int, pose, cov3=None, frame: str = "map"):
+        """A ``PoseWithCovarianceStamped``; ``cov3`` (3, 3) over x, y, yaw goes into the 6×6 covariance."""
+        cov = np.zeros((6, 6))
+        if cov3 is not None:
+            cov[np.ix_([0, 1, 5], [0, 1, 5])] = cov3
+        return self.T["geometry_msgs/msg/PoseWithCovarianceStamped"](
+            header=self.header(ns, frame),
+            pose=self.T["geometry_msgs/msg/PoseWithCovariance"](pose=self.pose(pose), covariance=cov.ravel()))
+
+    def camera_info(self, ns: int, K, D, R, P, size, frame: str = "camera", model: str = "plumb_bob"):
+        T = self.T
+        upper = self.ros1  # ROS 1 spells the matrices D, K, R, P
+        mats = {k.upper() if upper else k: np.asarray(v, float).ravel()
+                for k, v in (("d", D), ("k", K), ("r", R), ("p", P))}
+        roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+        return T["sensor_msgs/msg/CameraInfo"](header=self.header(ns, frame), height=size[1], width=size[0],
+                                               distortion_model=model, binning_x=0, binning_y=0, roi=roi, **mats)
+
+    def transforms(self, ns: int, edges):
+        """A ``tf2_msgs/TFMessage`` of ``(parent, child, (x, y, z), (qx, qy, qz, qw))`` transforms."""
+        T = self.T
+        out = []
+        for parent, child, t, q in edges:
+            out.append(T["geometry_msgs/msg/TransformStamped"](
+                header=self.header(ns, parent), child_frame_id=child,
+                transform=T["geometry_msgs/msg/Transform"](
+                    translation=T["geometry_msgs/msg/Vector3"](x=t[0], y=t[1], z=t[2]),
+                    rotation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))))
+        return T["tf2_msgs/msg/TFMessage"](transforms=out)
 
     def float64(self, value: float):
         return self.T["std_msgs/msg/Float64"](data=float(value))
@@ -109,14 +154,15 @@ def write_bag(path, messages, storage: str = "sqlite3"):
 
 
 def lab_messages(storage: str = "sqlite3", *, compressed: bool = False, pan: str | None = "float64",
-                 left_stamps=None, odom_stamps=None):
+                 left_stamps=None, odom_stamps=None, frame: str = "camera"):
     """The lab recording as bag messages: images (right 1 ms after left, one extra right image) received 2 ms
-    after their stamps (``left_stamps``: other header stamps, same bag times), odometry at the frame stamps
-    and halfway between (``odom_stamps``: at these stamps only), the pan at the frame stamps."""
+    after their stamps (``left_stamps``: other header stamps, same bag times) in the tf frame ``frame``,
+    odometry at the frame stamps and halfway between (``odom_stamps``: at these stamps only), the pan at the
+    frame stamps."""
     run, frames = lab_recording()
     m = Messages(storage == "ros1")
     stamps = lab_stamps() if left_stamps is None else np.asarray(left_stamps)
-    image = m.compressed if compressed else m.image
+    image = functools.partial(m.compressed if compressed else m.image, frame=frame)
     rows = []
     received = _ns(lab_stamps()[0]) + np.arange(N_FRAMES) * 500_000_000 + 2_000_000  # bag times, in order
     for k, f in enumerate(frames):
@@ -288,7 +334,9 @@ def test_missing_topic_lists_the_bags_topics(tmp_path, inputs):
         open_lab_bag(path, inputs, left_topic=ODOM)
     with pytest.raises(InputError, match=r"a bag needs `odom_topic`, a topic of nav_msgs/msg/Odometry"):
         open_lab_bag(path, inputs, odom_topic=None)
-    with pytest.raises(InputError, match=r"carries no calibration: pass `calib`"):
+    with pytest.raises(InputError, match=r"carries no calibration: no topic /stereo/left/camera_info \(the "
+                                         r"sensor_msgs/CameraInfo beside /stereo/left/image_rect\): pass `calib` "
+                                         r"or `left_info_topic`$"):
         open_lab_bag(path, inputs, calib=None)
     with pytest.raises(InputError, match=r"carries no map of walls: pass `map`"):
         open_lab_bag(path, inputs, map=None)

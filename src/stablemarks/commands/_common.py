@@ -215,3 +215,48 @@ def load_run_config(args, source=None, base=None):
     if source is not None:
         config = config.with_source_defaults(getattr(source, "config_defaults", None) or {})
     return config
+
+
+# ------------------------------------------------------------------ recordings: run's and convert's inputs
+def add_recording_arguments(p: argparse.ArgumentParser) -> None:
+    """The options that say how to read a recording (a bag's topics, the calibration, mount and map files, a
+    dataset's odometry, the stamp tolerance): shared by ``run`` and ``convert``, passed on to
+    :func:`~stablemarks.io.sources.open_sequence` by :func:`recording_options`."""
+    g = p.add_argument_group("recordings (bags and dataset folders)")
+    g.add_argument("--calib", metavar="DIR|FILE",
+                   help="calibration: folder with left.yaml and right.yaml (ROS camera_info) or an OpenCV file "
+                        "(bags: default their camera_info topics)")
+    g.add_argument("--camera", metavar="MOUNT.yaml",
+                   help="the stereo head's mount on the robot (default: mount.yaml beside the calibration; bags "
+                        "without one: the tf from --base-frame to the left image's frame)")
+    g.add_argument("--map", metavar="MAP", help="map of walls: our map YAML, a ROS map_server map.yaml, or GeoJSON")
+    g.add_argument("--left-topic", metavar="TOPIC", help="bag: left image topic (sensor_msgs/Image or CompressedImage)")
+    g.add_argument("--right-topic", metavar="TOPIC", help="bag: right image topic")
+    g.add_argument("--odom-topic", metavar="TOPIC", help="bag: wheel odometry topic (nav_msgs/Odometry)")
+    g.add_argument("--pan-topic", metavar="TOPIC",
+                   help="bag: head pan topic (std_msgs/Float64 or sensor_msgs/JointState; default: the mount's pan)")
+    g.add_argument("--pan-joint", metavar="NAME", help="bag: the pan joint's name in --pan-topic's joint states")
+    g.add_argument("--left-info-topic", metavar="TOPIC",
+                   help="bag: left sensor_msgs/CameraInfo (default: camera_info beside --left-topic)")
+    g.add_argument("--right-info-topic", metavar="TOPIC",
+                   help="bag: right sensor_msgs/CameraInfo (default: camera_info beside --right-topic)")
+    g.add_argument("--base-frame", metavar="FRAME",
+                   help="bag: the robot's tf frame, origin on the floor, for the mount from /tf_static and /tf "
+                        "(default base_link)")
+    g.add_argument("--groundtruth-topic", metavar="TOPIC",
+                   help="bag: true poses (nav_msgs/Odometry, geometry_msgs/PoseStamped or "
+                        "PoseWithCovarianceStamped), written as OUT/groundtruth.tum at the frame stamps")
+    g.add_argument("--odometry", metavar="CSV",
+                   help="KITTI/EuRoC: odometry CSV (stamp,x,y,theta; default: odometry.csv in the folder)")
+    g.add_argument("--sync-tolerance", type=float, default=0.005, metavar="SECONDS",
+                   help="largest stamp difference within a stereo pair and to the odometry (default 0.005)")
+
+
+def recording_options(args) -> dict:
+    """The keyword arguments of :func:`~stablemarks.io.sources.open_sequence` that the options of
+    :func:`add_recording_arguments` give (all but the source and the start pose)."""
+    return dict(left_topic=args.left_topic, right_topic=args.right_topic, odom_topic=args.odom_topic,
+                pan_topic=args.pan_topic, pan_joint=args.pan_joint, calib=args.calib, map=args.map,
+                mount=args.camera, odometry=args.odometry, tolerance=args.sync_tolerance,
+                left_info_topic=args.left_info_topic, right_info_topic=args.right_info_topic,
+                base_frame=args.base_frame, groundtruth_topic=args.groundtruth_topic)

@@ -10,15 +10,26 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import check_image_settings, check_out_dir, make_console, parse_sigmas, parse_triplet
+from ._common import (
+    add_recording_arguments,
+    check_image_settings,
+    check_out_dir,
+    make_console,
+    parse_sigmas,
+    parse_triplet,
+    recording_options,
+)
 
 NAME = "run"
+DEFAULT_POSE_SIGMA = "0.05,0.05,1deg"
+"""--pose-sigma's default, where the source gives no start covariance."""
 HELP = "run on-line landmark selection and EKF localization on a recorded sequence, bag or dataset"
 DESCRIPTION = (
     "Run the on-line loop (predict with odometry, segment stereo, associate and update, select new landmarks) "
     "on SOURCE: a sequence folder (sequence.yaml, as `stablemarks simulate` writes), a ROS 1 bag (.bag) or "
-    "ROS 2 bag (folder with metadata.yaml, or a .db3/.mcap file) with --left-topic, --right-topic, --odom-topic, "
-    "--calib and --map, a KITTI odometry sequence folder or a EuRoC MAV folder (with --map and odometry). "
+    "ROS 2 bag (folder with metadata.yaml, or a .db3/.mcap file) with --left-topic, --right-topic, --odom-topic "
+    "and --map (calibration, mount, start pose from its camera_info, /tf_static and /initialpose topics, or "
+    "--calib, --camera, --pose), a KITTI odometry sequence folder or a EuRoC MAV folder (with --map and odometry). "
     "Writes OUT/trajectory.tum (evo-ready, stamps as recorded), dead_reckoning.tum, landmarks.yaml, log.jsonl, "
     "config.yaml (the resolved configuration) and Figure 10."
 )
@@ -35,28 +46,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    choices=["stablemarks", "plane_no_selection", "all_segments", "dead_reckoning"],
                    help="which method to run (default: stablemarks, the full method)")
     p.add_argument("--pose", metavar="X,Y,THETA",
-                   help="start pose in the map (default: the sequence's initial pose; for bags and datasets the "
-                        "first odometry pose)")
-    p.add_argument("--pose-sigma", default="0.05,0.05,1deg", metavar="SX,SY,STHETA",
-                   help="standard deviations of the start pose (default 0.05,0.05,1deg)")
+                   help="start pose in the map (default: the sequence's initial pose; for bags the last "
+                        "/initialpose before the first frame; else the first odometry pose)")
+    p.add_argument("--pose-sigma", metavar="SX,SY,STHETA",
+                   help="standard deviations of the start pose (default: a bag's /initialpose covariance when "
+                        "its pose is used, else 0.05,0.05,1deg)")
     p.add_argument("--prior-landmarks", metavar="landmarks.yaml",
                    help="a landmark map written by an earlier run, to start from")
-    g = p.add_argument_group("recordings (bags and dataset folders)")
-    g.add_argument("--calib", metavar="DIR|FILE",
-                   help="calibration: folder with left.yaml and right.yaml (ROS camera_info) or an OpenCV file")
-    g.add_argument("--camera", metavar="MOUNT.yaml",
-                   help="the stereo head's mount on the robot (default: mount.yaml beside the calibration)")
-    g.add_argument("--map", metavar="MAP", help="map of walls: our map YAML, a ROS map_server map.yaml, or GeoJSON")
-    g.add_argument("--left-topic", metavar="TOPIC", help="bag: left image topic (sensor_msgs/Image or CompressedImage)")
-    g.add_argument("--right-topic", metavar="TOPIC", help="bag: right image topic")
-    g.add_argument("--odom-topic", metavar="TOPIC", help="bag: wheel odometry topic (nav_msgs/Odometry)")
-    g.add_argument("--pan-topic", metavar="TOPIC",
-                   help="bag: head pan topic (std_msgs/Float64 or sensor_msgs/JointState; default: the mount's pan)")
-    g.add_argument("--pan-joint", metavar="NAME", help="bag: the pan joint's name in --pan-topic's joint states")
-    g.add_argument("--odometry", metavar="CSV",
-                   help="KITTI/EuRoC: odometry CSV (stamp,x,y,theta; default: odometry.csv in the folder)")
-    g.add_argument("--sync-tolerance", type=float, default=0.005, metavar="SECONDS",
-                   help="largest stamp difference within a stereo pair and to the odometry (default 0.005)")
+    add_recording_arguments(p)
     o = p.add_argument_group("outputs")
     o.add_argument("--kitti", action="store_true", help="also write trajectory.kitti (KITTI odometry format)")
     o.add_argument("--save-rrd", metavar="FILE",
@@ -65,9 +62,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from ..io.recorded import note_sources
     from ..io.results import LogWriter, write_run
     from ..io.sources import open_sequence
-    from ..io.trajectory import write_kitti
+    from ..io.trajectory import write_kitti, write_tum
     from ..localizer import Localizer
     from ..maps import read_yaml
     from ..online import run_online
@@ -80,7 +78,7 @@ def run(args) -> int:
 
         require_rerun()
     start = parse_triplet(args.pose, "x, y, theta", "--pose") if args.pose else None
-    sigma = parse_sigmas(args.pose_sigma, "--pose-sigma")
+    sigma = parse_sigmas(args.pose_sigma, "--pose-sigma") if args.pose_sigma else None
     source_dir = args.source if Path(args.source).is_dir() else None
     if args.out is not None:
         check_out_dir(args.out, inputs=(source_dir,))
@@ -92,11 +90,11 @@ def run(args) -> int:
     warned = HealthWarnings()
     observers = [warned]
     with contextlib.ExitStack() as stack:
-        source = open_sequence(args.source, left_topic=args.left_topic, right_topic=args.right_topic,
-                               odom_topic=args.odom_topic, pan_topic=args.pan_topic, pan_joint=args.pan_joint,
-                               calib=args.calib, map=args.map, mount=args.camera, odometry=args.odometry,
-                               tolerance=args.sync_tolerance, start_pose=start)
+        source = open_sequence(args.source, **recording_options(args), start_pose=start)
         stack.callback(source.close)
+        start_cov = getattr(source, "initial_cov", None) if sigma is None else np.diag(sigma**2)
+        if start_cov is None:
+            start_cov = np.diag(parse_sigmas(DEFAULT_POSE_SIGMA) ** 2)
         config = load_run_config(args, source)
         for note in source.notes:
             console.print(f"note: {note}")
@@ -105,7 +103,7 @@ def run(args) -> int:
         camera = source.camera
         check_image_settings(config, camera.width, camera.height, f"the images of {source.name}")
         localizer = Localizer(source.world_map, source.camera, start_pose=source.initial_pose,
-                              start_cov=np.diag(sigma**2), config=config, method=args.method, prior_landmarks=prior)
+                              start_cov=start_cov, config=config, method=args.method, prior_landmarks=prior)
         rrd = None
         if args.save_rrd:
             from ..io.rerun_log import RerunRecorder
@@ -116,6 +114,19 @@ def run(args) -> int:
             log = stack.enter_context(LogWriter(out / "log.jsonl"))  # streamed: an interrupted run keeps its log
             result = run_online(source, localizer, observers=[*observers, log], progress=progress, keep="poses")
     paths = write_run(out, result, config, log=log.path)
+    sources = getattr(source, "sources", {})
+    if sources:  # where a recording's inputs came from: comment lines atop config.yaml
+        from ..cli import FLAGS
+        from ..errors import for_cli
+
+        cov = f"--pose-sigma {args.pose_sigma}" if sigma is not None else sources.get(
+            "start_covariance", f"the default --pose-sigma {DEFAULT_POSE_SIGMA}")
+        note_sources(paths.get("config"), {**{k: for_cli(v, FLAGS) for k, v in sources.items()},
+                                           "start_covariance": cov})
+    truth = getattr(source, "groundtruth", None)
+    if truth is not None and "groundtruth" not in paths and not np.isnan(truth[:, 0]).all():
+        known = ~np.isnan(truth[:, 0])  # a ground-truth topic that misses some frames: the frames it covers
+        paths["groundtruth"] = write_tum(out / "groundtruth.tum", source.stamps[known], truth[known])
     if args.kitti:
         cam = source.camera
         paths["kitti"] = write_kitti(out / "trajectory.kitti", result.poses, [r.pan for r in result.records],

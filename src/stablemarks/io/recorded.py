@@ -174,7 +174,11 @@ class RecordedSource:
     start_pose : (3,) the robot's start in the map (its :attr:`initial_pose`); default the first odometry
         pose (the odometry frame taken as the map frame).
     groundtruth : (n, 3) true poses at the frame stamps (NaN where unknown), or None.
+    start_cov : (3, 3) covariance of ``start_pose`` over x [m], y [m], yaw [rad] when the recording gives one
+        (its :attr:`initial_cov`; None: the caller's default).
     notes : sentences for the user about what was left out (frames without odometry, unmatched images).
+    sources : where each input came from, ``{what: where}`` (e.g. ``{"calibration": "camera_info
+        /cam/left/camera_info, /cam/right/camera_info"}``), for the run's ``config.yaml``.
 
     Subclasses implement :meth:`raw_pair`; :meth:`close` releases open files.
     """
@@ -182,7 +186,8 @@ class RecordedSource:
     config_defaults: dict = {}
 
     def __init__(self, name: str, calibration: StereoCalibration, camera: StereoCamera, world_map: Map,
-                 stamps, odometry, pans, *, start_pose=None, groundtruth=None, notes: Sequence[str] = ()):
+                 stamps, odometry, pans, *, start_pose=None, groundtruth=None, start_cov=None,
+                 notes: Sequence[str] = (), sources: dict[str, str] | None = None):
         self.name = name
         self.calibration = calibration
         self.camera = camera
@@ -199,7 +204,13 @@ class RecordedSource:
         check_stamps(self.stamps, f"{name}: frames")
         self.initial_pose = self.odometry_poses[0].copy() if start_pose is None else np.asarray(start_pose, float)
         self.groundtruth = None if groundtruth is None else np.asarray(groundtruth, dtype=float)
+        if self.groundtruth is not None and self.groundtruth.shape != (n, 3):
+            raise InputError(expected(f"ground truth ({n}, 3)", self.groundtruth.shape, where=name))
+        self.initial_cov = None if start_cov is None else np.asarray(start_cov, dtype=float)
+        if self.initial_cov is not None and self.initial_cov.shape != (3, 3):
+            raise InputError(expected("a (3, 3) start covariance", self.initial_cov.shape, where=name))
         self.notes = list(notes)
+        self.sources = dict(sources or {})
 
     # -- the FrameSource protocol
     def __len__(self) -> int:
@@ -277,3 +288,25 @@ def load_stereo_calibration(calib: str | Path | None, what: str) -> StereoCalibr
                          "right.yaml (ROS camera_info) or an OpenCV stereo calibration file")
     return load_calibration(calib)
 
+
+def config_sources_text(sources: dict[str, str]) -> str:
+    """``sources`` as YAML comment lines for the top of a run's ``config.yaml``: ``# sources:`` then
+    ``#   what: where``. Comments, so the file still loads with ``--config`` (a configuration has no such
+    section); without the leading ``# `` the block is YAML. Empty for no sources."""
+    if not sources:
+        return ""
+    import yaml
+
+    text = yaml.safe_dump({"sources": {str(k): str(v) for k, v in sources.items()}}, sort_keys=False,
+                          allow_unicode=True, width=1000)
+    return "".join(f"# {line}\n" for line in text.splitlines())
+
+
+def note_sources(config_path: str | Path | None, sources: dict[str, str]) -> None:
+    """Put :func:`config_sources_text` at the top of a run's ``config.yaml`` (nothing when either is missing)."""
+    if config_path is None or not sources or not Path(config_path).is_file():
+        return
+    path = Path(config_path)
+    tmp = path.with_name(f".{path.name}.sources.tmp")
+    tmp.write_text(config_sources_text(sources) + path.read_text())
+    tmp.replace(path)

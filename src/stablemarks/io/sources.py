@@ -13,8 +13,10 @@ KITTI odometry sequence     a folder with ``calib.txt``, ``times.txt`` and ``ima
 EuRoC MAV sequence          a folder with ``mav0/`` (or the ``mav0`` folder itself)          :mod:`.datasets`
 ==========================  ===============================================================  =========================
 
-A bag or a dataset folder carries no map of walls, and a bag no calibration: they come from the arguments
-``map``, ``calib`` and ``mount``. Everything is read and cross-checked when the source is
+A bag or a dataset folder carries no map of walls: it comes from the argument ``map``. A bag's calibration,
+mount, start pose and ground truth come from its own topics (``sensor_msgs/CameraInfo``, ``/tf_static`` and
+``/tf``, ``/initialpose``, ``groundtruth_topic``) unless the arguments ``calib``, ``mount`` and
+``start_pose`` give them. Everything is read and cross-checked when the source is
 opened, including the first stereo pair against the calibration, so a broken input fails before the run.
 
 What bags and dataset folders share lives in :mod:`.recorded`; this module only recognises a path and
@@ -29,7 +31,7 @@ from pathlib import Path
 
 from ..errors import InputError, SequenceError, expected
 from ..maps import COORDINATE_LIMIT
-from .bags import open_bag
+from .bags import BASE_FRAME, open_bag
 from .datasets import open_euroc, open_kitti
 from .recorded import (  # noqa: F401  (re-exported: what bags and datasets share)
     BAG_SUFFIXES,
@@ -94,6 +96,10 @@ def open_sequence(
     odometry: str | Path | None = None,
     tolerance: float = SYNC_TOLERANCE,
     start_pose=None,
+    left_info_topic: str | None = None,
+    right_info_topic: str | None = None,
+    base_frame: str | None = None,
+    groundtruth_topic: str | None = None,
 ):
     """Open a recorded run as a :class:`~stablemarks.frames.FrameSource` (kinds in the module docstring):
     anything ``stablemarks run`` accepts, with its options as keyword arguments.
@@ -105,16 +111,24 @@ def open_sequence(
         ``sensor_msgs/CompressedImage``) and odometry topic (``nav_msgs/Odometry``); bags only, required.
     pan_topic, pan_joint : a bag's head-pan topic (``std_msgs/Float64`` or ``sensor_msgs/JointState`` with
         the joint ``pan_joint``); without it every frame has the mount's pan.
-    calib : calibration folder (``left.yaml``/``right.yaml``) or OpenCV file; bags and EuRoC (which
-        otherwise computes it from its ``sensor.yaml`` files).
+    calib : calibration folder (``left.yaml``/``right.yaml``) or OpenCV file; bags (which otherwise read
+        their ``sensor_msgs/CameraInfo`` topics) and EuRoC (which otherwise computes it from its
+        ``sensor.yaml`` files).
     map : the map of walls (any format :func:`~stablemarks.io.mapfiles.load_any_map` reads); required for
         bags and datasets, replaces a sequence folder's own map.
-    mount : the mount file; default ``mount.yaml`` beside the calibration (KITTI: 1.65 m high).
+    mount : the mount file; default ``mount.yaml`` beside the calibration (KITTI: 1.65 m high; a bag without
+        either: its tf from ``base_frame`` to the left image's frame).
     odometry : an odometry CSV (module docstring) for a dataset folder; default ``odometry.csv`` in it.
     tolerance : largest stamp difference [s] within a stereo pair and to the nearest odometry pose outside
         the odometry's time span.
     start_pose : (3,) the robot's start in the map (the source's ``initial_pose``); default the sequence's
-        ``initial_pose`` (None when it has none) or, for bags and datasets, the first odometry pose.
+        ``initial_pose`` (None when it has none), for a bag the last ``/initialpose`` before the first frame
+        (its covariance becomes the source's ``initial_cov``), else the first odometry pose.
+    left_info_topic, right_info_topic : a bag's ``sensor_msgs/CameraInfo`` topics; default the
+        ``camera_info`` beside each image topic. Not read when ``calib`` is given.
+    base_frame : a bag's robot frame for the tf mount (default ``base_link``; its origin on the floor).
+    groundtruth_topic : a bag's true poses (``nav_msgs/Odometry``, ``geometry_msgs/PoseStamped`` or
+        ``PoseWithCovarianceStamped``), interpolated at the frames (the source's ``groundtruth``).
 
     Raises :class:`~stablemarks.errors.InputError` (a :class:`SequenceError` for the recording itself) naming
     what is missing or wrong, and the options that do not apply to what ``path`` holds.
@@ -131,10 +145,12 @@ def open_sequence(
     kind = _kind(p)
     given = {"left_topic": left_topic, "right_topic": right_topic, "odom_topic": odom_topic,
              "pan_topic": pan_topic, "pan_joint": pan_joint, "calib": calib, "map": map,
-             "mount": mount, "odometry": odometry}
+             "mount": mount, "odometry": odometry, "left_info_topic": left_info_topic,
+             "right_info_topic": right_info_topic, "base_frame": base_frame, "groundtruth_topic": groundtruth_topic}
     allowed = {
         "sequence": {"map"},
-        "bag": {"left_topic", "right_topic", "odom_topic", "pan_topic", "pan_joint", "calib", "map", "mount"},
+        "bag": {"left_topic", "right_topic", "odom_topic", "pan_topic", "pan_joint", "calib", "map", "mount",
+                "left_info_topic", "right_info_topic", "base_frame", "groundtruth_topic"},
         "kitti": {"map", "mount", "odometry"},
         "euroc": {"calib", "map", "mount", "odometry"},
     }
@@ -153,7 +169,9 @@ def open_sequence(
     if kind == "bag":
         return open_bag(p, left_topic=left_topic, right_topic=right_topic, odom_topic=odom_topic,
                         pan_topic=pan_topic, pan_joint=pan_joint, calib=calib, map=map, mount=mount,
-                        tolerance=tolerance, start_pose=start_pose)
+                        tolerance=tolerance, start_pose=start_pose, left_info_topic=left_info_topic,
+                        right_info_topic=right_info_topic, base_frame=base_frame or BASE_FRAME,
+                        groundtruth_topic=groundtruth_topic)
     if kind == "kitti":
         return open_kitti(p, map=map, mount=mount, odometry=odometry, tolerance=tolerance, start_pose=start_pose)
     if kind == "euroc":

@@ -358,3 +358,27 @@ def test_a_tilted_camera_is_refused(tmp_path, inputs):
     bag = write_bag(tmp_path / "tilted", rows)
     with pytest.raises(SequenceError, match=re.escape(f"tf base_link→{OPTICAL}: the camera is 5.0° from level")):
         open_sequence(bag, left_topic=LEFT, right_topic=RIGHT, odom_topic=ODOM, map=inputs["map"])
+
+
+def test_ground_truth_that_misses_frames_is_written_for_the_frames_it_covers(tmp_path, inputs, capsys):
+    first = _ns(lab_stamps()[0])
+    rows = [r for r in ros_messages() if not (r[0] == GT and r[1] < first + 1_000_000)]  # none at frame 0
+    bag = write_bag(tmp_path / "lab", rows)
+    with open_sequence(bag, left_topic=LEFT, right_topic=RIGHT, odom_topic=ODOM, map=inputs["map"],
+                       groundtruth_topic=GT) as source:
+        assert np.isnan(source.groundtruth[0]).all() and source.true_pose(0) is None
+        np.testing.assert_allclose(source.groundtruth[1:], lab_truth()[1:], rtol=0, atol=1e-12)
+        assert source.notes[-1].startswith(f"1 of {N_FRAMES} frames have no ground truth: outside the time span "
+                                           f"of {GT}")
+    out = run_cli(tmp_path, "out", bag, *TOPICS, "--map", inputs["map"], "--groundtruth-topic", GT)
+    stamps, poses = read_tum(out / "groundtruth.tum")
+    np.testing.assert_allclose(stamps, lab_stamps()[1:], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(poses, lab_truth()[1:], rtol=0, atol=1e-9)
+    # convert keeps no partial ground truth (a folder's covers every frame), and says so.
+    capsys.readouterr()
+    assert main(["convert", str(bag), *TOPICS, "--map", str(inputs["map"]), "--groundtruth-topic", GT,
+                 "--out", str(tmp_path / "seq")]) == 0
+    assert "1 of 4 frames have no ground truth: groundtruth.tum is not written" in capsys.readouterr().out
+    assert not (tmp_path / "seq" / "groundtruth.tum").exists()
+    err = cli_error(capsys, "convert", tmp_path / "seq", "--out", tmp_path / "again")
+    assert err.endswith("seq: already a sequence folder (convert reads bags and KITTI or EuRoC folders)")

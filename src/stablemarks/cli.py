@@ -57,7 +57,7 @@ FLAGS = {
     "pan_topic": "--pan-topic", "pan_joint": "--pan-joint", "calib": "--calib", "map": "--map", "mount": "--camera",
     "odometry": "--odometry", "tolerance": "--sync-tolerance", "start_pose": "--pose", "force": "--force",
     "save_rrd": "--save-rrd", "left_info_topic": "--left-info-topic", "right_info_topic": "--right-info-topic",
-    "base_frame": "--base-frame", "groundtruth_topic": "--groundtruth-topic", "pose_sigma": "--pose-sigma",
+    "base_frame": "--base-frame", "groundtruth_topic": "--groundtruth-topic",
 }
 """The library's parameter names (as its error messages write them) → the command line's flags."""
 

@@ -46,10 +46,12 @@ def run(args: argparse.Namespace) -> int:
     out = check_out_dir(args.out, inputs=(source_dir,), replaces=args.force)
     check_target(out.resolve(), args.force)
     console = make_console()
-    with open_sequence(args.source, **recording_options(args), start_pose=start) as source:
-        if not isinstance(source, RecordedSource):
-            raise InputError(f"{args.source}: already a sequence folder (convert reads bags and KITTI or EuRoC "
-                             "folders)")
+    source = open_sequence(args.source, **recording_options(args), start_pose=start)
+    if not isinstance(source, RecordedSource):
+        source.close()
+        raise InputError(f"{args.source}: already a sequence folder (convert reads bags and KITTI or EuRoC "
+                         "folders)")
+    with source:
         for note in source.notes:
             console.print(f"note: {note}")
         n = len(source)

@@ -10,7 +10,29 @@ Topics, named on the command line:
 - wheel odometry (``--odom-topic``): ``nav_msgs/Odometry``; its pose gives ``x``, ``y`` and the yaw;
 - optionally the head's pan (``--pan-topic``): ``std_msgs/Float64`` [rad] (stamped by its bag time) or
   ``sensor_msgs/JointState`` (the joint ``--pan-joint``, or its only joint); without it every frame has
-  the mount's pan.
+  the mount's pan (or the tf's, below);
+- optionally the true poses (``--groundtruth-topic``): ``nav_msgs/Odometry``, ``geometry_msgs/PoseStamped``
+  or ``PoseWithCovarianceStamped``, interpolated at the frame stamps (the source's ``groundtruth``).
+
+What a robot's bag carries beside them replaces the files, unless they are given:
+
+- the calibration (``--calib``): the ``sensor_msgs/CameraInfo`` beside each image topic (``/ns/left/image_raw``
+  → ``/ns/left/camera_info``; a compressed image's ``/compressed`` dropped first) or ``--left-info-topic`` and
+  ``--right-info-topic``: width, height, ``K``, ``D``, ``R``, ``P`` and the distortion model, checked and
+  assembled as a camera_info file pair is (:mod:`.calibration`); the right ``P[0,3] = −f·B``. Images on
+  ``image_rect*`` topics are taken as rectified (their camera is ``P``'s), others as raw. The first message of
+  each topic is used;
+- the mount (``--camera``, or ``mount.yaml`` beside ``--calib``): the tf transform from ``--base-frame``
+  (default ``base_link``, its origin on the floor) to the left image's ``header.frame_id``, an optical frame
+  (REP-103: z forward, x right, y down), chained through ``/tf_static`` and ``/tf``: its position gives
+  ``x, y, height``, the heading of its z axis the pan. The head must be level (within 2°). When a transform
+  of the chain moves (a pan joint on ``/tf``), each frame's pan is read from it (unless ``--pan-topic``);
+- the start pose (``--pose``): the last ``/initialpose`` (``geometry_msgs/PoseWithCovarianceStamped``, in
+  the map) stamped before the first frame, moved by the odometry from its stamp to the first frame when
+  the odometry reaches back that far; its x, y, yaw covariance is the source's ``initial_cov`` (unless all
+  zero). Without it, the first odometry pose.
+
+:attr:`BagSource.sources` tells where each came from.
 
 Stereo pairs are matched by header stamp: a left and a right image that are each other's nearest within
 the tolerance (default 5 ms) form a frame, stamped by the left image. The odometry poses and pans are

@@ -148,3 +148,22 @@ def test_front_end_in_regions_equals_the_dense_front_end(frames):
             assert np.isnan(got[~done]).all(), (name, k)
         assert np.array_equal(front.disparity.valid, dense.disparity.valid & front.lazy.done[0])
     assert topped_up >= 2
+
+
+def test_select_landmarks_reads_the_lazy_images_valid_columns(frames):
+    """:func:`select_landmarks` takes the valid columns of a region front end from its :class:`RegionDisparity`
+    (kept up to date as pixels are added) instead of scanning the images: the same columns, and the model equals
+    the dense front end's."""
+    from stablemarks.pipeline import select_landmarks, valid_columns
+
+    from .test_regions_pipeline import assert_same_model
+
+    config = Config()
+    for name, k, left, right, camera, world_map, X in frames:
+        reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
+        front = run_front_end(left, right, config, reg)
+        model = select_landmarks(front, camera, world_map, X, COV_PRIOR, config)
+        dense = select_landmarks(run_front_end(left, right, config), camera, world_map, X, COV_PRIOR, config)
+        assert_same_model(model, dense, f"{name} {k}")
+        if front.lazy is not None:
+            assert (front.lazy.found(0), front.lazy.found(1)) == valid_columns(front.disparity)

@@ -600,7 +600,9 @@ def select_landmarks(
     if not preds:
         warnings.append("no reference plane of the map is in view of the pose prior")
     pairs = front.kept_pairs
-    columns = valid_columns(front.disparity)
+    lazy = getattr(front, "lazy", None)
+    # valid_columns of the images as computed so far (the lazy images keep that answer up to date)
+    columns = (lazy.found(0), lazy.found(1)) if lazy is not None else valid_columns(front.disparity)
     fits, models = [], []
     t_fit = t_model = 0.0
     for pred in preds:

@@ -155,3 +155,32 @@ def test_missing_backend_says_what_to_install():
             assert f"pip install 'stablemarks[{backend}]'" in str(exc)
     with pytest.raises(InputError, match="backend: expected one of loky, dask, ray"):
         check_backend("mpi")
+
+
+def test_methods_of_one_run_share_its_rendered_frames(monkeypatch):
+    """``run_trials`` renders each frame of a run once for all its methods (a head panned elsewhere gets its own
+    rendering): fewer renderings than running the methods one by one, and the same results."""
+    from stablemarks.evaluation import run_trials
+    from stablemarks.sim import render
+
+    calls = []
+    original = render.Renderer.render
+
+    def counted(self, X, pan, rng):
+        calls.append((np.asarray(X, float).tobytes(), float(pan)))
+        return original(self, X, pan, rng)
+
+    monkeypatch.setattr(render.Renderer, "render", counted)
+    methods = ["dead_reckoning", "stablemarks", "plane_no_selection"]
+    trials = make_trials(["lab"], 1, methods, frames=3)
+    shared = run_trials(trials)
+    n_shared, distinct = len(calls), len(set(calls))
+    calls.clear()
+    alone = [run_trials([t])[0] for t in trials]
+    assert n_shared == distinct < len(calls)  # every (pose, pan) rendered once
+    assert len(calls) >= 3 * len(methods)
+    for a, b in zip(shared, alone, strict=True):
+        assert "error" not in a
+        for key in ("stage_times", "time_per_frame"):  # wall times
+            a.pop(key), b.pop(key)
+        assert json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)

@@ -81,6 +81,7 @@ from .localizer import Estimate, Localizer
 from .methods import METHODS
 from .metrics import along_wall_nees, ate_rmse, chi2_bounds, fraction_inside, pose_nees, position_errors, reobservation
 from .online import OnlineResult, run_online
+from .sim.render import renderer_for
 from .sim.run import Run, simulate_run
 from .sim.scenario import Scenario, load_scenario
 from .sim.source import SimulatedSource
@@ -307,11 +308,15 @@ def run_trials(trials: Sequence[Trial]) -> list[dict]:
     except Exception as exc:  # noqa: BLE001 - every task of this run fails alike, the others go on
         return [failed_result(t, first.scenario, exc) for t in trials]
     runs: dict[str, tuple[TruthObserver, OnlineResult] | Exception] = {}
+    renderer = None  # one for the methods of this run: each frame rendered once (_SharedRenderer)
 
     def online(method: str) -> tuple[TruthObserver, OnlineResult]:
+        nonlocal renderer
         if method not in runs:
             try:
-                source = SimulatedSource(run)
+                if renderer is None:
+                    renderer = _SharedRenderer(renderer_for(scenario))
+                source = SimulatedSource(run, renderer=renderer)
                 truth = TruthObserver()
                 config = first.config.with_source_defaults(source.config_defaults)
                 if first.pan_policy is not None:
@@ -340,6 +345,30 @@ def run_trials(trials: Sequence[Trial]) -> list[dict]:
         except Exception as exc:  # noqa: BLE001 - one failing task must not end the evaluation
             out.append(failed_result(t, scenario.name, exc))
     return out
+
+
+class _SharedRenderer:
+    """A scenario's renderer shared by the methods of one run (:func:`run_trials`): each stereo pair is rendered
+    once and handed to every method that asks for the same frame — the same pose, pan and random stream (a
+    frame's images depend on nothing else), so the same images as rendering again. A method whose head
+    points elsewhere gets its own rendering. The pairs are read-only; ``renders`` counts the renderings."""
+
+    def __init__(self, renderer) -> None:
+        self.renderer = renderer
+        self.scenario = renderer.scenario
+        self.renders = 0
+        self._frames: dict[tuple, object] = {}
+
+    def render(self, X, pan: float, rng: np.random.Generator):
+        key = (np.asarray(X, dtype=float).tobytes(), float(pan), repr(rng.bit_generator.state))
+        frame = self._frames.get(key)
+        if frame is None:
+            frame = self.renderer.render(X, pan, rng)
+            for img in (frame.left, frame.right):
+                img.setflags(write=False)  # shared between the methods: none may change it
+            self._frames[key] = frame
+            self.renders += 1
+        return frame
 
 
 class TrialFailure(RuntimeError):

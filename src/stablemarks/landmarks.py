@@ -56,7 +56,8 @@ class LandmarkConfig:
         if self.filter_boundary_sigma not in ("measured", "model"):
             raise InputError(expected("'measured' or 'model'", self.filter_boundary_sigma,
                                       where="landmarks.filter_boundary_sigma"))
-        for name in ("off_wall_sigma", "row_sigma_px", "max_range", "max_incidence_deg", "boundary_gate_sigma"):
+        for name in ("off_wall_sigma", "row_sigma_px", "max_range", "max_incidence_deg", "boundary_gate_sigma",
+                     "fit_gate_chi2"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0):
                 raise InputError(expected("a positive number", v, where=f"landmarks.{name}"))
@@ -119,6 +120,11 @@ class LandmarkConfig:
     boundary_gate_sigma: float = 3.0
     """A found boundary farther along the wall from the map's free edge than this many σ (its own σ and the
     pose's, projected on the wall) disagrees with the map: nothing is modelled from it in that frame."""
+    fit_gate_chi2: float = 13.8
+    """A fitted wall line ``(a, b)`` (offset and slope from the map's wall, seen through the belief) must agree
+    with the map given the pose covariance and the fit's own: Mahalanobis² at most this (χ²₂, 0.999). A
+    line that does not is another surface caught in a wide band (a wall behind a free-standing screen when
+    the heading is uncertain), bent and shifted far beyond its σ: nothing is modelled from it in that frame."""
     min_edge_step_sigma: float = 3.0
     """A free edge is searched only where the map puts something at a different depth just beyond it: the
     disparity step the map predicts across the edge must reach this many σ of the disparity noise
@@ -136,7 +142,8 @@ class Boundary:
     the same from the rows' spread and the image noise alone (computed only when
     ``landmarks.filter_boundary_sigma`` is ``measured``, else NaN); ``snapped`` when moved to the outermost member
     segment; ``rows`` the number of image rows that entered the left search; ``inward`` (2,) the wall's unit
-    direction from this edge into the wall.
+    direction from this edge into the wall. ``cov_uv`` (2, 2) the covariance of ``u`` [px²] (with the SAD window
+    allowance, shared by both images) and ``cov_uv_measured`` without it (NaN unless ``measured``).
     """
 
     plane_id: str
@@ -150,6 +157,8 @@ class Boundary:
     rows: int
     inward: np.ndarray
     sigma_along_measured: float = np.nan
+    cov_uv: np.ndarray | None = field(default=None, repr=False)
+    cov_uv_measured: np.ndarray | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True)
@@ -178,6 +187,13 @@ class Candidate:
         heights from the rows and the depth).
     range : distance from the left optical centre [m]; ``incidence`` the angle between the viewing ray and
         the wall's normal [rad].
+    shared_jacobian, shared_cov, sigma_own : the error model of ``s`` that the filter enters (DESIGN §4):
+        ``s`` is a function of what all features of the plane share — the fitted line ``(a, b)`` and the
+        boundary's columns ``(u_l, u_r)``, with covariance ``shared_cov`` (4, 4) — and of the feature's own
+        columns. ``shared_jacobian`` (4,) is ``∂s/∂(a, b, u_bl, u_br)``, ``sigma_own`` [m] the σ of ``s`` from
+        the feature's own columns. Features of one boundary then have ``Σ = J Σ_shared Jᵀ + diag(σ_own²)``:
+        the line's slope moves them all, in proportion to their distance from the edge (not captured by
+        ``σ_b² 11ᵀ + diag(σ_f²)``, which treats the fit's error as independent per feature).
     """
 
     plane_id: str
@@ -208,11 +224,22 @@ class Candidate:
     height_margin: float = np.inf
     range: float = 0.0
     incidence: float = 0.0
+    shared_jacobian: np.ndarray | None = field(default=None, repr=False)
+    shared_cov: np.ndarray | None = field(default=None, repr=False)
+    sigma_own: float = np.nan
 
     @property
     def sigma_s(self) -> float:
         """σ of ``s`` along the wall: ``sqrt(σ_b² + σ_f²)`` (Eq 17) [m]."""
         return float(np.hypot(self.sigma_b, self.sigma_f))
+
+    @property
+    def sigma_relative(self) -> float:
+        """σ of ``s`` from the joint error model (``shared_jacobian``; :attr:`sigma_s` without it) [m]."""
+        if self.shared_jacobian is None:
+            return self.sigma_s
+        j = self.shared_jacobian
+        return float(np.sqrt(j @ self.shared_cov @ j + self.sigma_own**2))
 
     @property
     def length(self) -> float:
@@ -431,7 +458,8 @@ def search_boundary(
         _, cov_m = camera.triangulate(u_b[0], u_b[1], X, cov_uv=np.diag(var_b))
         _, cov_m = fit.fuse_point(P, cov_m)
         sigma_m = float(np.sqrt(t @ cov_m @ t))
-    return Boundary(plane.id, edge, u_b, sigma_u, P_hat, cov_hat, sigma_along, snapped, rows_used, t, sigma_m)
+    return Boundary(plane.id, edge, u_b, sigma_u, P_hat, cov_hat, sigma_along, snapped, rows_used, t, sigma_m,
+                    cov_uv, np.diag(var_b) if config.filter_boundary_sigma == "measured" else None)
 
 
 def model_features(
@@ -483,6 +511,8 @@ def model_features(
     span = np.maximum(np.abs(h - z_low), np.abs(h - z_high))
     margin = config.off_wall_sigma * np.sqrt(sigma_row_z**2 + (span / Zc) ** 2 * var_Z)
     incidence = np.arccos(np.clip(np.abs(view @ plane.normal), 0.0, 1.0))
+    J_shared, sigma_own, cov_shared = relative_error_model(camera, fit, boundary, pairs.u_left[k], pairs.u_right[k],
+                                                           t, config.filter_boundary_sigma == "measured")
     out = []
     for rank, j in enumerate(np.argsort(d_p, kind="stable")):
         i = int(k[j])
@@ -495,9 +525,61 @@ def model_features(
                       P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured,
                       contrast=np.inf if contrast is None else float(contrast[i]),
                       wall_offset=float(G[j]), sigma_wall_offset=float(np.sqrt(var_G[j])),
-                      height_margin=float(margin[j]), range=float(dist[j]), incidence=float(incidence[j]))
+                      height_margin=float(margin[j]), range=float(dist[j]), incidence=float(incidence[j]),
+                      shared_jacobian=None if J_shared is None else J_shared[j], shared_cov=cov_shared,
+                      sigma_own=np.nan if J_shared is None else float(sigma_own[j]))
         )
     return out
+
+
+def relative_error_model(camera: StereoCamera, fit: PlaneFit, boundary: Boundary, u_left, u_right, t,
+                         measured: bool = False, step_px: float = 0.01, step_line: float = 1e-4):
+    """The error model of features' distances ``d = (P̂_f − P̂_b)·t`` along the wall from the boundary, as
+    the estimator computes them (triangulate, fuse with the fitted line, Eqs 12–17).
+
+    Returns ``J`` (n, 4) = ``∂d/∂(a, b, u_bl, u_br)`` (what the plane's features share: the line and the
+    boundary's columns), ``σ_own`` (n,) the σ of ``d`` from each feature's own columns (σ_img each), and
+    ``Σ_shared`` (4, 4) = blockdiag(Σ_R, Σ_ub) (``measured``: the boundary without the SAD window
+    allowance). Derivatives by central differences of the estimator itself (``step_px`` [px],
+    ``step_line`` [m, 1]): the fusion's gain depends on the line, so no closed form is simpler. ``(None, None,
+    None)`` when the boundary carries no column covariance.
+    """
+    cov_ub = boundary.cov_uv_measured if measured and boundary.cov_uv_measured is not None else boundary.cov_uv
+    if cov_ub is None:
+        return None, None, None
+    X = fit.X
+    u_f = np.stack([np.asarray(u_left, dtype=float), np.asarray(u_right, dtype=float)], axis=-1)  # (n, 2)
+
+    def distances(line, ub, uf):
+        P_f, cov_f = camera.triangulate(uf[:, 0], uf[:, 1], X)
+        P_b, cov_b = camera.triangulate(ub[0], ub[1], X, cov_uv=cov_ub)
+        P_f, _ = line.fuse_point(P_f, cov_f)
+        P_b, _ = line.fuse_point(P_b, cov_b)
+        return (P_f - P_b) @ t
+
+    ub0 = np.asarray(boundary.u, dtype=float)
+    J = np.empty((len(u_f), 4))
+    for i, h in enumerate((step_line, step_line)):
+        key = "a" if i == 0 else "b"
+        hi = replace(fit, **{key: getattr(fit, key) + h})
+        lo = replace(fit, **{key: getattr(fit, key) - h})
+        J[:, i] = (distances(hi, ub0, u_f) - distances(lo, ub0, u_f)) / (2 * h)
+    for i in range(2):
+        e = np.zeros(2)
+        e[i] = step_px
+        J[:, 2 + i] = (distances(fit, ub0 + e, u_f) - distances(fit, ub0 - e, u_f)) / (2 * step_px)
+    own = np.zeros(len(u_f))
+    for i in range(2):
+        e = np.zeros(2)
+        e[i] = step_px
+        g = (distances(fit, ub0, u_f + e) - distances(fit, ub0, u_f - e)) / (2 * step_px)
+        own += (g * camera.sigma_img) ** 2
+    cov_shared = np.zeros((4, 4))
+    cov_shared[:2, :2] = fit.cov_R
+    cov_shared[2:, 2:] = cov_ub
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(own))):
+        return None, None, None
+    return J, np.sqrt(own), cov_shared
 
 
 def select(candidates: list[Candidate], boundaries: list[Boundary], config: LandmarkConfig = LandmarkConfig(),
@@ -602,6 +684,13 @@ def landmarks_on_plane(
     (:func:`boundary_disagreement`) and not used when it is farther than ``boundary_gate_sigma`` σ.
     ``border_sigma_px``: see :func:`search_boundary`.
     """
+    if cov_X is not None:
+        m2 = fit_disagreement(camera, fit, cov_X)
+        if m2 > config.fit_gate_chi2:
+            return PlaneLandmarks(fit, [], np.zeros(len(pairs), dtype=bool), [], [
+                (None, f"plane {fit.plane.label!r}: the fitted wall is {100 * fit.a:+.1f} cm off and turned "
+                       f"{np.degrees(np.arctan(fit.b)):+.1f}° from the map's (Mahalanobis² {m2:.0f} > "
+                       f"{config.fit_gate_chi2:g} with the pose's uncertainty): another surface in its band, not used")])
     members = plane_members(fit, pairs, left_segments, plane_config)
     # A wall in line with another (two partitions in a row) shares its plane: segments beyond the wall's ends
     # fit it too. Only those between the two ends' search windows are the wall's.
@@ -655,6 +744,45 @@ def landmarks_on_plane(
     mapped = mapped_boundaries(fit.plane, boundaries, ref)
     return PlaneLandmarks(fit, boundaries, members, select(cands, boundaries + mapped, config, fit.plane.z),
                           rejected, searched)
+
+
+def seen_wall_jacobian(camera: StereoCamera, fit: PlaneFit) -> np.ndarray:
+    """``J = ∂(a, b)/∂X`` (2, 3): how an error of the pose moves the map's wall as the camera sees it placed with
+    the belief ``fit.X`` (offset ``a`` at ``fit.s0`` [m] and slope ``b`` of the line in the wall's frame), by
+    central differences: the wall carried into the camera frame by one pose and back out by another."""
+    plane, X = fit.plane, np.asarray(fit.X, dtype=float)
+    P = plane.point_at(np.array([fit.s0 - 1.0, fit.s0 + 1.0]))
+    c0 = camera.camera_pose(X)
+    d = P - c0.translation
+    cs, sn = np.cos(c0.theta), np.sin(c0.theta)
+    q = np.stack([cs * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + cs * d[:, 1]], axis=-1)  # camera frame
+
+    def seen(Xp):
+        c1 = camera.camera_pose(Xp)
+        c, s_ = np.cos(c1.theta), np.sin(c1.theta)
+        Q = c1.translation + np.stack([c * q[:, 0] - s_ * q[:, 1], s_ * q[:, 0] + c * q[:, 1]], axis=-1)
+        o, t = plane.offset(Q), plane.along(Q)
+        b = (o[1] - o[0]) / (t[1] - t[0])
+        return np.array([o[0] + b * (fit.s0 - t[0]), b])
+
+    J = np.empty((2, 3))
+    for i, h in enumerate((1e-4, 1e-4, 1e-5)):
+        e = np.zeros(3)
+        e[i] = h
+        J[:, i] = (seen(X + e) - seen(X - e)) / (2 * h)
+    return J
+
+
+def fit_disagreement(camera: StereoCamera, fit: PlaneFit, cov_X) -> float:
+    """Mahalanobis² of the fitted line ``(a, b)`` against the map's wall (``(0, 0)``) with covariance
+    ``J Σ_X Jᵀ + Σ_R`` (:func:`seen_wall_jacobian`)."""
+    J = seen_wall_jacobian(camera, fit)
+    S = J @ np.asarray(cov_X, dtype=float) @ J.T + fit.cov_R
+    r = np.array([fit.a, fit.b])
+    try:
+        return float(r @ np.linalg.solve(S, r))
+    except np.linalg.LinAlgError:
+        return 0.0
 
 
 def boundary_disagreement(b: Boundary, plane, X, cov_X) -> tuple[float, float]:

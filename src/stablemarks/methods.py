@@ -92,7 +92,7 @@ class Method:
                 continue
             plane = ekf.landmark_plane(i)
             gap = float(plane.along(c.P) - plane.along(lm.position))
-            if abs(gap) > sigma * np.sqrt(float(lm.cov[0, 0]) + c.sigma_s**2):
+            if abs(gap) > sigma * np.sqrt(float(lm.cov[0, 0]) + c.sigma_relative**2):
                 dropped.append(i)
             else:
                 keep.append((i, j))
@@ -156,7 +156,9 @@ def method_named(name: str) -> Method:
 # ------------------------------------------------------------------ entering landmarks
 def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
                          polarity: dict[int, int] | None = None, boundary_sigma: str = "model") -> Entered:
-    """Enter candidates as wall landmarks, jointly per boundary: ``Σ = σ_b² 11ᵀ + diag(σ_f²)`` (DESIGN §4).
+    """Enter candidates as wall landmarks, jointly per boundary: ``Σ = J Σ_shared Jᵀ + diag(σ_own²)`` from each
+    candidate's error model (the fitted line and the boundary shared; see :class:`~stablemarks.landmarks.Candidate`),
+    or ``σ_b² 11ᵀ + diag(σ_f²)`` for candidates without one (DESIGN §4).
 
     ``polarity`` maps a candidate's pair index to its edge's polarity along the wall
     (:func:`~stablemarks.estimation.wall_polarity`); ``boundary_sigma``: which σ_b
@@ -169,11 +171,18 @@ def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
         groups.setdefault((c.plane_id, c.edge), []).append(c)
     for (plane_id, edge), group in groups.items():
         plane = world_map[plane_id]
-        sb = group[0].sigma_b
-        if boundary_sigma == "measured" and np.isfinite(group[0].sigma_b_measured):
-            sb = group[0].sigma_b_measured
-        sf = np.array([c.sigma_f for c in group])
-        cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
+        if all(c.shared_jacobian is not None for c in group):
+            # the joint error model: the fitted line and the boundary shared, the columns each its own
+            J = np.stack([c.shared_jacobian for c in group])
+            own = np.array([c.sigma_own for c in group])
+            cov = J @ group[0].shared_cov @ J.T + np.diag(own**2)
+            cov = 0.5 * (cov + cov.T)
+        else:
+            sb = group[0].sigma_b
+            if boundary_sigma == "measured" and np.isfinite(group[0].sigma_b_measured):
+                sb = group[0].sigma_b_measured
+            sf = np.array([c.sigma_f for c in group])
+            cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
         new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
         added = ekf.add_landmarks(new, cov, frame=frame)
         out.priors.append((added, [float(c.s) for c in group], cov))

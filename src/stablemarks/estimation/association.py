@@ -51,25 +51,39 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     if model is not None:
         for plane_model in model.planes:
             plane = plane_model.fit.plane
-            matched = [(i, c) for i, c in match_along_wall(ekf, plane, plane_model.candidates,
-                                                           polarity=wall_polarity(polarity, plane, centre))
-                       if i in in_view]
-            if matched:
-                walls.append(matched)
+            options = [[(i, c) for i, c in m if i in in_view]
+                       for m in match_along_wall(ekf, plane, plane_model.candidates,
+                                                 polarity=wall_polarity(polarity, plane, centre), every=True)]
+            options = [m for m in options if m]
+            if options:
+                walls.append(options)
     # Wall by wall, most features first: one wall's wrong pattern must not throw out the others' right ones.
+    # Regularly spaced features match at several offsets along the wall; the first (best-scoring) offset whose
+    # matching is jointly compatible with the predicted pose is taken. Only when none is, the wall's pattern
+    # disagrees with the prediction (its best offset is reported): a pattern aliased by one feature spacing
+    # is not evidence against the odometry.
     chosen: list[tuple[int, int]] = []
     kept, rejected = [], []
-    for matched in sorted(walls, key=len, reverse=True):
-        if ekf.joint_compatible(chosen + matched, measured, pan):
-            chosen += matched
-            kept.append(matched)
+    for options in sorted(walls, key=lambda o: len(o[0]), reverse=True):
+        for matched in options:
+            if len(matched) < len(options[0]) - 1:
+                continue  # far fewer features than the best offset explains: not an alternative
+            if ekf.joint_compatible(chosen + matched, measured, pan):
+                chosen += matched
+                kept.append(matched)
+                break
         else:
-            rejected.append(matched)
+            rejected.append(options[0])
     if report is not None:
         report["compatible"], report["incompatible"] = kept, rejected
     taken_l = {i for i, _ in chosen}
     taken_p = {j for _, j in chosen}
-    rest = [i for i in ekf.landmark_ids if i not in taken_l]
+    # A wall whose pattern of two or more features was matched places every feature on it to a few mm: a wall
+    # landmark there that the pattern leaves out does not sit where its line is (a line standing a few cm in
+    # front of the wall shifts along it with the viewing angle), so the image gates do not get to take it.
+    patterned = {ekf.landmark_plane(m[0][0]).id for m in kept if len(m) >= 2}
+    rest = [i for i in ekf.landmark_ids if i not in taken_l and not (
+        ekf.landmark(i).kind == "wall" and ekf.landmark_plane(i).id in patterned)]
     free = [j for j in range(len(measured)) if j not in taken_p]
     if rest and free:
         cost = height_cost(ekf, pairs, pan) + polarity_cost(ekf, polarity, centre)
@@ -83,7 +97,7 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
 
 
 def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
-                     polarity: np.ndarray | None = None) -> list[tuple[int, int]]:
+                     polarity: np.ndarray | None = None, every: bool = False):
     """Match this frame's candidates on ``plane`` with the wall landmarks on it, by their pattern.
 
     Candidates and landmarks are placed along the wall (from ``p1``). The two sets differ by one common
@@ -92,7 +106,8 @@ def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
     that matches the most features (ties: least squared residual) wins, and features are then paired
     one-to-one within ``tol`` σ of their own errors. Features whose vertical extents disagree never match;
     among offsets that match equally many, the likeliest one (its own prior and the residuals) wins.
-    Returns ``(landmark id, segment-pair index)``.
+    Returns ``(landmark id, segment-pair index)``; with ``every``, the matchings of all distinct offsets, best
+    first (a list of such lists).
     """
     lms = [ekf.landmark(i) for i in ekf.landmark_ids]
     lms = [lm for lm in lms if lm.kind == "wall" and lm.plane_id == plane.id]
@@ -115,7 +130,7 @@ def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
         lp = np.array([[lm.polarity for lm in lms]])
         cp = np.array([[polarity[cd.pair]] for cd in candidates])
         same_height &= (lp * cp) >= 0
-    best = None
+    found = []
     for i in range(len(c)):
         for j in range(len(a)):
             delta = a[j] - c[i]
@@ -129,14 +144,19 @@ def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,
             # most features matched; then the likeliest offset and residuals
             prior = delta**2 / (sb**2 + float(np.mean(var_a)))
             score = (int(ok.any(axis=1).sum()), -prior - float(np.sum(np.where(ok, (resid / scale) ** 2, 0.0))))
-            if best is None or score > best[0]:
-                best = (score, delta, resid, ok)
-    if best is None:
+            if ok.any():
+                found.append((score, delta, resid, ok))
+    if not found:
         return []
-    _, delta, resid, ok = best
-    big = 1e6
-    rows, cols = linear_sum_assignment(np.where(ok, resid**2, big))
-    return [(int(lms[j].id), int(candidates[i].pair)) for i, j in zip(rows, cols, strict=True) if ok[i, j]]
+    found.sort(key=lambda f: f[0], reverse=True)
+    out, seen = [], set()
+    for _, _, resid, ok in found if every else found[:1]:
+        rows, cols = linear_sum_assignment(np.where(ok, resid**2, 1e6))
+        m = tuple((int(lms[j].id), int(candidates[i].pair)) for i, j in zip(rows, cols, strict=True) if ok[i, j])
+        if m and m not in seen:
+            seen.add(m)
+            out.append(list(m))
+    return out if every else (out[0] if out else [])
 
 
 def height_cost(ekf: JointEKF, pairs, pan: float, weight: float = 9.0) -> np.ndarray:

@@ -14,6 +14,8 @@ from __future__ import annotations
 import copy
 import json
 import math
+import os
+import re
 import shutil
 import tempfile
 from contextlib import contextmanager
@@ -160,6 +162,23 @@ def assert_only_our_errors(load, *args):
 
 
 @contextmanager
+def fd2_text():
+    """What is written to the process's stderr (file descriptor 2) meanwhile, as ``[text]`` afterwards (not
+    :func:`stablemarks.io.images.native_stderr`: the loaders take its lock themselves)."""
+    said = []
+    with tempfile.TemporaryFile() as sink:
+        saved = os.dup(2)
+        try:
+            os.dup2(sink.fileno(), 2)
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            said.append(sink.read().decode("utf-8", "replace"))
+
+
+@contextmanager
 def scratch():
     with tempfile.TemporaryDirectory(prefix="stablemarks-fuzz-") as d:
         yield Path(d)
@@ -262,16 +281,38 @@ def test_map_yaml(data):
         assert_only_our_errors(load_any_map, path)
 
 
+def mutate_json_text(text: str, data) -> str:
+    """``text`` (JSON) with a member repeated in its object or brackets opened deep at one place (closed or not)."""
+    members = list(re.finditer(r'"[^"]*": ', text))
+    if members and data.draw(st.booleans()):
+        m = data.draw(st.sampled_from(members))
+        value = data.draw(st.sampled_from(['1, ', '"x", ', '[], ', '{}, ']))
+        return text[:m.start()] + m.group(0) + value + text[m.start():]
+    depth = data.draw(st.sampled_from([98, 101, 150, 5000, 100_000]))
+    opener = data.draw(st.sampled_from(["[", '{"a": ']))
+    nested = opener * depth + ("0" + ("]" if opener == "[" else "}") * depth if data.draw(st.booleans()) else "")
+    # as the first element of a list (a valid document when closed), or anywhere
+    lists = [m.end() for m in re.finditer(r"\[\s*(?=[^\s\]])", text)]
+    if lists and data.draw(st.booleans()):
+        at = data.draw(st.sampled_from(lists))
+        return text[:at] + nested + ", " + text[at:]
+    at = data.draw(st.integers(0, len(text)))
+    return text[:at] + nested + text[at:]
+
+
 @FUZZ
 @given(data=st.data())
 def test_geojson(data):
     with scratch() as d:
         path = d / "walls.geojson"
-        if data.draw(st.booleans()):
+        kind = data.draw(st.sampled_from(["doc", "text", "json"]))
+        if kind == "doc":
             doc = mutate(GEOJSON_DOC, data)
             path.write_text(json.dumps(doc, default=str))
-        else:
+        elif kind == "text":
             path.write_text(mutate_text(json.dumps(GEOJSON_DOC, indent=1), data))
+        else:  # keys twice in one object, nesting beyond the limit and beyond Python's recursion limit
+            path.write_text(mutate_json_text(json.dumps(GEOJSON_DOC, indent=1), data))
         assert_only_our_errors(load_any_map, path)
 
 
@@ -290,8 +331,10 @@ def test_map_server_yaml_and_pgm(occupancy, data):
         else:
             path.write_text(dump_yaml(doc))
             (d / "room.pgm").write_bytes(mutate_bytes((src / "room.pgm").read_bytes(), data))
-        assert_only_our_errors(load_occupancy_map, path)
-        assert_only_our_errors(load_any_map, path)
+        with fd2_text() as said:  # a damaged image: OpenCV's own lines stay off stderr
+            assert_only_our_errors(load_occupancy_map, path)
+            assert_only_our_errors(load_any_map, path)
+        assert said == [""], said
 
 
 # ------------------------------------------------------------------ scenario

@@ -170,6 +170,62 @@ def test_missing_or_unreadable_image(tmp_path):
         load_occupancy_map(tmp_path / "absent.yaml")
 
 
+@pytest.mark.parametrize("kind", ["png", "pgm", "empty"])
+def test_truncated_occupancy_image_is_one_quiet_line(tmp_path, capfd, kind):
+    """A truncated PNG or PGM (or an empty file) is one ConfigError naming the file and what the decoder said;
+    nothing from libpng or OpenCV reaches stderr."""
+    ok, png = cv2.imencode(".png" if kind == "png" else ".pgm", room_image())
+    data = png.tobytes()
+    name = f"room.{'png' if kind == 'png' else 'pgm'}"
+    (tmp_path / name).write_bytes(b"" if kind == "empty" else data[: len(data) // 2])
+    path = tmp_path / "room.yaml"
+    path.write_text(yaml.safe_dump({"image": name, "resolution": RES, "origin": [0.0, 0.0, 0.0], "negate": 0,
+                                    "occupied_thresh": 0.65, "free_thresh": 0.196}))
+    capfd.readouterr()
+    for load in (load_occupancy_map, load_any_map):
+        with pytest.raises(ConfigError, match=rf"room.yaml: image: cannot read .*{name} \(truncated, damaged") as e:
+            load(path)
+        assert "\n" not in str(e.value)
+    assert capfd.readouterr().err == ""
+
+
+def test_geojson_with_a_key_twice_is_refused_naming_the_key(tmp_path):
+    """Two members of one GeoJSON object with the same name are an error (not last-one-wins), as in YAML."""
+    feature = '{"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 0]]}}'
+    (tmp_path / "walls.geojson").write_text('{"type": "FeatureCollection", "features": [' + feature + '],\n'
+                                            ' "features": []}')
+    with pytest.raises(ConfigError, match=r"^.*walls.geojson: invalid JSON: duplicate key 'features' in one object$"):
+        load_any_map(tmp_path / "walls.geojson")
+    inner = feature.replace('"type": "LineString"', '"type": "LineString", "type": "Point"')
+    (tmp_path / "walls.geojson").write_text('{"type": "FeatureCollection", "features": [' + inner + ']}')
+    with pytest.raises(ConfigError, match=r"duplicate key 'type'"):
+        load_any_map(tmp_path / "walls.geojson")
+    (tmp_path / "walls.geojson").write_text('{"type": "FeatureCollection", "features": [' + feature + ']}')
+    assert len(load_any_map(tmp_path / "walls.geojson")) == 1  # the same keys in different objects are fine
+
+
+@pytest.mark.parametrize("depth, message", [
+    (150, r"invalid JSON: nested deeper than 100 levels$"),
+    (100_000, r"invalid JSON: nested too deeply \(at most 100 levels\)$"),  # beyond Python's recursion limit
+])
+def test_deeply_nested_geojson_is_one_line(tmp_path, depth, message):
+    (tmp_path / "walls.geojson").write_text('{"type": "FeatureCollection", "features": ' + "[" * depth + "]" * depth
+                                            + "}")
+    with pytest.raises(ConfigError, match=message) as e:
+        load_any_map(tmp_path / "walls.geojson")
+    assert str(e.value).startswith(str(tmp_path / "walls.geojson")) and len(str(e.value)) < 200
+    (tmp_path / "walls.json").write_text('{"a": ' * 5000 + "1" + "}" * 5000)
+    with pytest.raises(ConfigError, match=r"walls.json: invalid JSON: nested too deeply"):
+        load_any_map(tmp_path / "walls.json")
+
+
+def test_geojson_errors_through_the_cli_are_one_line(tmp_path, capfd):
+    (tmp_path / "walls.geojson").write_text('{"type": "FeatureCollection", "features": [], "features": []}')
+    assert main(["map-walls", str(tmp_path / "walls.geojson"), "--out", str(tmp_path / "out.yaml")]) == 1
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and "duplicate key 'features'" in err
+
+
 # ------------------------------------------------------------ wall extraction
 def test_skeleton_of_a_bar_is_its_centre_line():
     mask = np.zeros((11, 30), bool)

@@ -75,8 +75,9 @@ import cv2
 import numpy as np
 from numba import njit
 
-from ..errors import ConfigError, expected
-from ..maps import Map, ReferencePlane, _number, parse_map, parse_plane, read_yaml
+from ..errors import ConfigError, expected, short_repr
+from ..maps import MAX_YAML_DEPTH, Map, ReferencePlane, _number, parse_map, parse_plane, read_yaml
+from .images import imdecode_quietly
 
 OCCUPIED = 100
 FREE = 0
@@ -179,9 +180,16 @@ def _parse_occupancy(data: dict, path: Path) -> OccupancyMap:
         image_path = path.parent / image_path
     if not image_path.is_file():
         raise ConfigError(f"{where}: image: no such file {image_path}")
-    pixels = cv2.imread(str(image_path), cv2.IMREAD_UNCHANGED)
+    try:
+        buf = np.frombuffer(image_path.read_bytes(), np.uint8)
+    except OSError as exc:
+        raise ConfigError(f"{where}: image: cannot read {image_path} ({exc.strerror or exc.__class__.__name__})") \
+            from None
+    pixels, reason = imdecode_quietly(buf) if buf.size else (None, "empty file")  # libpng/OpenCV kept off stderr
     if pixels is None:
-        raise ConfigError(f"{where}: image: cannot read {image_path} (not an image format OpenCV reads)")
+        why = f": {reason}" if reason else ""
+        raise ConfigError(f"{where}: image: cannot read {image_path} (truncated, damaged or not an image format "
+                          f"OpenCV reads{why})")
     grid = occupancy_from_image(pixels, bool(negate), occupied_thresh, free_thresh, mode)
     return OccupancyMap(grid, resolution, origin, where)
 
@@ -984,17 +992,62 @@ def save_geojson(world_map: Map, path: str | Path) -> None:
 
 
 # ------------------------------------------------------------ any map
+class JSONLimitError(ValueError):
+    """A JSON document breaks one of the strict reader's rules (:func:`load_json_text`)."""
+
+
+def _unique_keys(pairs: list[tuple[str, object]]) -> dict:
+    """``object_pairs_hook`` of :func:`load_json_text`: the object as a dict, unless a key comes twice."""
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise JSONLimitError(f"duplicate key {short_repr(key, 60)} in one object")
+        out[key] = value
+    return out
+
+
+def _check_json_depth(doc: object) -> None:
+    """Refuse a document nested deeper than :data:`~stablemarks.maps.MAX_YAML_DEPTH` (iterative)."""
+    stack = [(doc, 1)]
+    while stack:
+        node, depth = stack.pop()
+        children = node.values() if isinstance(node, dict) else node if isinstance(node, list) else None
+        if children is None:
+            continue
+        if depth > MAX_YAML_DEPTH:
+            raise JSONLimitError(f"nested deeper than {MAX_YAML_DEPTH} levels")
+        stack.extend((c, depth + 1) for c in children if isinstance(c, dict | list))
+
+
+def load_json_text(text: str) -> object:
+    """Parse JSON strictly, as the YAML loader (:func:`stablemarks.maps.load_yaml_text`) reads YAML: a key
+    repeated in one object and nesting deeper than :data:`~stablemarks.maps.MAX_YAML_DEPTH` are errors
+    (:class:`JSONLimitError`) instead of a silent last-one-wins or a ``RecursionError``; syntax errors are
+    :class:`json.JSONDecodeError`."""
+    try:
+        doc = json.loads(text, object_pairs_hook=_unique_keys)
+    except RecursionError:
+        raise JSONLimitError(f"nested too deeply (at most {MAX_YAML_DEPTH} levels)") from None
+    _check_json_depth(doc)
+    return doc
+
+
 def _read_json(path: Path) -> object:
+    """A JSON map file (:func:`load_json_text`); every failure is one :class:`ConfigError` line naming it."""
     try:
         text = path.read_text()
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such map file") from None
-    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
+    except (IsADirectoryError, NotADirectoryError, PermissionError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read map file: {exc.__class__.__name__}") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read map file: {exc.strerror or exc.__class__.__name__}") from None
     try:
-        return json.loads(text)
+        return load_json_text(text)
     except json.JSONDecodeError as exc:
         raise ConfigError(f"{path}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    except JSONLimitError as exc:
+        raise ConfigError(f"{path}: invalid JSON: {exc}") from None
 
 
 def load_any_map(path: str | Path, params: WallExtraction = WallExtraction()) -> Map:

@@ -167,3 +167,23 @@ def test_select_landmarks_reads_the_lazy_images_valid_columns(frames):
         assert_same_model(model, dense, f"{name} {k}")
         if front.lazy is not None:
             assert (front.lazy.found(0), front.lazy.found(1)) == valid_columns(front.disparity)
+
+
+def test_region_disparity_with_the_opencv_backend(frames):
+    """A :class:`RegionDisparity` made with the ``opencv`` backend still computes (its prepared pair holds the 8-bit
+    images): the masked OpenCV images, topped up in place, and the same possible pixels as the numba one."""
+    name, k, left, right, *_ = frames[0]
+    sad = SADConfig(backend="opencv")
+    rects_l, rects_r = np.array([[100, 200, 150, 300]]), np.array([[120, 220, 200, 260]])
+    lazy = RegionDisparity(left, right, sad, rects_l, rects_r)
+    _same_disparity(lazy.result, compute_disparity_regions(left, right, sad, rects_l, rects_r))
+    more = np.zeros(left.shape, bool)
+    more[300:350, 100:400] = True
+    lazy.compute(more, None)
+    want = lazy.done[0]
+    full = compute_disparity(left, right, sad)
+    assert np.array_equal(lazy.result.left, np.where(want, full.left, np.nan), equal_nan=True)
+    numba = RegionDisparity(left, right, SADConfig())
+    for c in (100, 320, 500):
+        assert np.array_equal(lazy.possible(0, c), numba.possible(0, c))
+        assert np.array_equal(lazy.possible(1, c), numba.possible(1, c))

@@ -303,9 +303,19 @@ def regions_on_prepared(prepared: PreparedPair, regions, right_regions=None, out
     values at the requested pixels. ``out``: None (fresh frozen outputs, NaN / False elsewhere) or the
     writable (left, right, valid) (H, W) arrays to write the requested pixels into, leaving the others as they
     are."""
-    if prepared.config.backend != "numba":
-        raise ConfigError(expected("the 'numba' backend", prepared.config.backend, where="regions_on_prepared"))
     shape = prepared.shape
+    if prepared.config.backend != "numba":  # the whole images, masked (prepared holds the 8-bit pair)
+        res = compute_disparity_regions(prepared.left, prepared.right_pad, prepared.config, regions, right_regions)
+        if out is None:
+            return res
+        want = [np.ones(shape, bool) if regions is None else
+                _runs_mask(*_region_runs(regions, shape, "regions"), shape),
+                np.zeros(shape, bool) if right_regions is None else
+                _runs_mask(*_region_runs(right_regions, shape, "right_regions"), shape)]
+        np.copyto(out[0], res.left, where=want[0])
+        np.copyto(out[2], res.valid, where=want[0])
+        np.copyto(out[1], res.right, where=want[1])
+        return DisparityResult(*out)
     left_runs = _all_runs(*shape) if regions is None else _region_runs(regions, shape, "regions")
     right_runs = _no_runs(shape[0]) if right_regions is None else _region_runs(right_regions, shape, "right_regions")
     return _run_prepared(prepared, left_runs, right_runs, out=out)
@@ -1097,13 +1107,13 @@ def _prepare(image8, sobel, cap, pad_l, pad_r, texture):  # pragma: no cover - n
 @dataclass(frozen=True, eq=False)
 class PreparedPair:
     """A pair as the numba kernel reads it (:func:`prepare_pair`), to be matched in several calls
-    (:func:`compute_disparity_regions` with ``prepared``) without preparing it again.
+    (:func:`regions_on_prepared`) without preparing it again.
 
     ``left`` (H, W) and ``right_pad`` (H, pad_l + W + pad_r) int16: the prefiltered images (the right one
     zero-padded); ``asat_left``, ``asat_right`` (H, W) uint8: ``min(|Sobel_x|, 255)`` of the images, which
     the texture test sums ((1, 1) when there is no texture test); ``shape`` (H, W); ``config`` the
     matching parameters it was prepared for. Empty images when the window does not fit (no pixel is
-    ever valid then).
+    ever valid then). With the ``opencv`` backend ``left``, ``right_pad`` are copies of the 8-bit pair.
     """
 
     left: np.ndarray
@@ -1116,7 +1126,7 @@ class PreparedPair:
 
 def prepare_pair(left, right, config: SADConfig = SADConfig(), sobel_left=None, sobel_right=None) -> PreparedPair:
     """The pair (as :func:`compute_disparity` takes it) prefiltered once for any number of
-    :func:`compute_disparity_regions` calls with the same ``config``; ``sobel_left``, ``sobel_right``: the
+    :func:`regions_on_prepared` calls with the same ``config``; ``sobel_left``, ``sobel_right``: the
     images' x-Sobel derivatives (int16, 3×3, borders reflected: ``cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3)``)
     if already computed (None: computed here)."""
     left8, right8 = _pair(left, right)
@@ -1125,6 +1135,10 @@ def prepare_pair(left, right, config: SADConfig = SADConfig(), sobel_left=None, 
 
 def _prepared(left8, right8, sobel_left, sobel_right, config: SADConfig) -> PreparedPair:
     n_rows, n_cols = left8.shape
+    if config.backend != "numba":  # the 8-bit pair itself, and the texture images (RegionDisparity.possible)
+        asat = [np.minimum(np.abs((_xsobel(img) if sob is None else sob).astype(np.int32)), 255).astype(np.uint8)
+                for img, sob in ((left8, sobel_left), (right8, sobel_right))]
+        return PreparedPair(np.array(left8), np.array(right8), *asat, (n_rows, n_cols), config)
     r = config.block_size // 2
     if not (n_rows > 2 * r and n_cols > 2 * r):
         none = np.zeros((0, 0), np.int16)

@@ -187,3 +187,47 @@ def test_region_disparity_with_the_opencv_backend(frames):
     for c in (100, 320, 500):
         assert np.array_equal(lazy.possible(0, c), numba.possible(0, c))
         assert np.array_equal(lazy.possible(1, c), numba.possible(1, c))
+
+
+# ------------------------------------------------------------------ point-on-plane fusion (Eqs 12–14)
+def fuse_point_reference(fit, P, cov_P):
+    """The former :meth:`PlaneFit.fuse_point`, in NumPy."""
+    P = np.asarray(P, dtype=float)
+    cov_P = np.asarray(cov_P, dtype=float)
+    G, H, G_R = fit.constraint(P)
+    var_V = np.einsum("...i,ij,...j->...", G_R, fit.cov_R, G_R)
+    PH = cov_P @ H
+    S = PH @ H + var_V
+    K = PH / S[..., None]
+    P_hat = P - K * G[..., None]
+    IKH = np.eye(2) - K[..., :, None] * H
+    KK = K[..., :, None] * K[..., None, :]
+    cov_hat = IKH @ cov_P @ np.swapaxes(IKH, -1, -2) + var_V[..., None, None] * KK
+    return P_hat, 0.5 * (cov_hat + np.swapaxes(cov_hat, -1, -2))
+
+
+def test_fuse_point_equals_the_numpy_reference(frames):
+    """:meth:`PlaneFit.fuse_point` (one numba loop) against the former NumPy expressions, on the planes fitted in
+    the scenarios' frames, for triangulated points and random ones, single points, stacks and broadcast
+    covariances: the same points and covariances to 1e-12 of their scale (rounding: the Joseph form cancels)."""
+    from stablemarks.pipeline import process_frame
+
+    rng = np.random.default_rng(3)
+    config = Config()
+    n_fits = 0
+    for name, _k, left, right, camera, world_map, X in frames:
+        model = process_frame(left, right, camera, world_map, X, COV_PRIOR, config)
+        cam = config.camera(camera)
+        for fit in (f for f in model.fits if f):
+            n_fits += 1
+            u = rng.uniform(50, 600, 7)
+            P, cov = cam.triangulate(u, u - rng.uniform(5, 60, 7), X)
+            A = rng.normal(size=(5, 3, 2, 2)) * 0.05
+            cases = [(P, cov), (P[0], cov[0]), (P, cov[0]), (P[:1], cov), (rng.normal(size=(5, 3, 2)) * 3,
+                                                                             A @ np.swapaxes(A, -1, -2))]
+            for P_in, C_in in cases:
+                got, want = fit.fuse_point(P_in, C_in), fuse_point_reference(fit, P_in, C_in)
+                for g, w in zip(got, want, strict=True):
+                    assert g.shape == w.shape
+                    np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-12 * np.abs(w).max(), err_msg=name)
+    assert n_fits >= 6

@@ -16,6 +16,7 @@ pose's uncertainty enters only through the prediction gates.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import cv2
@@ -296,16 +297,21 @@ class PlaneFit:
         """
         P = np.asarray(P, dtype=float)
         cov_P = np.asarray(cov_P, dtype=float)
-        G, H, G_R = self.constraint(P)
-        var_V = np.einsum("...i,ij,...j->...", G_R, self.cov_R, G_R)
-        PH = cov_P @ H
-        S = PH @ H + var_V
-        K = PH / S[..., None]
-        P_hat = P - K * G[..., None]  # innovation 0 − G(L̃)
-        IKH = np.eye(2) - K[..., :, None] * H
-        KK = K[..., :, None] * K[..., None, :]
-        cov_hat = IKH @ cov_P @ np.swapaxes(IKH, -1, -2) + var_V[..., None, None] * KK
-        return P_hat, 0.5 * (cov_hat + np.swapaxes(cov_hat, -1, -2))
+        if P.shape[-1:] != (2,) or cov_P.shape[-2:] != (2, 2):
+            raise ValueError(f"fuse_point: expected points (..., 2) and covariances (..., 2, 2), got {P.shape} and "
+                             f"{cov_P.shape}")
+        shape = P.shape[:-1]
+        if shape == cov_P.shape[:-2]:
+            flat_P, flat_cov = P.reshape(-1, 2), cov_P.reshape(-1, 2, 2)
+        else:
+            shape = np.broadcast_shapes(shape, cov_P.shape[:-2])
+            n = math.prod(shape)
+            flat_P = np.broadcast_to(P, (*shape, 2)).reshape(n, 2)
+            flat_cov = np.broadcast_to(cov_P, (*shape, 2, 2)).reshape(n, 2, 2)
+        plane = self.plane
+        P_hat, cov_hat = _fuse_points(flat_P, flat_cov, plane.P1, plane.direction, plane.normal, float(self.a),
+                                      float(self.b), float(self.s0), np.asarray(self.cov_R, dtype=float))
+        return P_hat.reshape(*shape, 2), cov_hat.reshape(*shape, 2, 2)
 
     def point_on_line(self, s) -> np.ndarray:
         """World points on the fitted line at distances ``s`` along the map wall."""
@@ -444,6 +450,52 @@ def _on_line(disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu, a, b, s0, limit):  # 
                 o = c_o + Z * r_o[k]
                 keep[i, k] = abs((o - a - b * (s - s0)) / (abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6)) <= limit
     return keep
+
+
+@njit(cache=True, error_model="numpy")
+def _fuse_points(P, cov_P, P1, t, nrm, a, b, s0, cov_R):  # pragma: no cover - numba
+    """:meth:`PlaneFit.fuse_point` of points ``P`` (n, 2) with covariances ``cov_P`` (n, 2, 2): Eq 12's
+    constraint (``G``, ``H = ∂G/∂L``, ``G_R = ∂G/∂R``), ``Σ_V = G_R Σ_R G_Rᵀ`` (Eq 14), one Kalman update each,
+    the covariance in Joseph form and symmetrized — the same operations, element by element, as the NumPy
+    expressions it replaced (a few small arrays per call cost more than the arithmetic)."""
+    n = P.shape[0]
+    P_hat = np.empty((n, 2))
+    cov_hat = np.empty((n, 2, 2))
+    H0 = nrm[0] - b * t[0]
+    H1 = nrm[1] - b * t[1]
+    for i in range(n):
+        px = P[i, 0] - P1[0]
+        py = P[i, 1] - P1[1]
+        ds = (px * t[0] + py * t[1]) - s0
+        G = (px * nrm[0] + py * nrm[1]) - a - b * ds
+        g0 = -1.0
+        g1 = -ds
+        var_V = g0 * cov_R[0, 0] * g0 + g0 * cov_R[0, 1] * g1 + g1 * cov_R[1, 0] * g0 + g1 * cov_R[1, 1] * g1
+        c00, c01, c10, c11 = cov_P[i, 0, 0], cov_P[i, 0, 1], cov_P[i, 1, 0], cov_P[i, 1, 1]
+        PH0 = c00 * H0 + c01 * H1
+        PH1 = c10 * H0 + c11 * H1
+        S = (PH0 * H0 + PH1 * H1) + var_V
+        K0 = PH0 / S
+        K1 = PH1 / S
+        P_hat[i, 0] = P[i, 0] - K0 * G  # innovation 0 − G(L̃)
+        P_hat[i, 1] = P[i, 1] - K1 * G
+        A00 = 1.0 - K0 * H0
+        A01 = 0.0 - K0 * H1
+        A10 = 0.0 - K1 * H0
+        A11 = 1.0 - K1 * H1
+        M00 = A00 * c00 + A01 * c10
+        M01 = A00 * c01 + A01 * c11
+        M10 = A10 * c00 + A11 * c10
+        M11 = A10 * c01 + A11 * c11
+        R00 = (M00 * A00 + M01 * A01) + var_V * (K0 * K0)
+        R01 = (M00 * A10 + M01 * A11) + var_V * (K0 * K1)
+        R10 = (M10 * A00 + M11 * A01) + var_V * (K1 * K0)
+        R11 = (M10 * A10 + M11 * A11) + var_V * (K1 * K1)
+        cov_hat[i, 0, 0] = 0.5 * (R00 + R00)
+        cov_hat[i, 0, 1] = 0.5 * (R01 + R10)
+        cov_hat[i, 1, 0] = 0.5 * (R10 + R01)
+        cov_hat[i, 1, 1] = 0.5 * (R11 + R11)
+    return P_hat, cov_hat
 
 
 def median(x: np.ndarray) -> float:

@@ -70,6 +70,23 @@ def test_a_wrong_pan_is_reported_within_twenty_frames(lab_seq, tmp_path, capsys)
     err = capsys.readouterr().err
     first = [line for line in err.splitlines() if line.startswith("warning: frame") and "pan" in line]
     assert first and int(first[0].split()[2]) < 20 and "--pan-topic" in first[0], err
+    # and the pose is no worse than the odometry's: walls turned from the map count as edges not found
+    log = _log(tmp_path / "out")
+    truth = np.array([r["true_pose"] for r in log])[:, :2]
+    ate = np.sqrt(np.mean(np.sum((np.array([r["pose"] for r in log])[:, :2] - truth) ** 2, axis=1)))
+    ate_dr = np.sqrt(np.mean(np.sum((np.array([r["dead_reckoning"] for r in log])[:, :2] - truth) ** 2, axis=1)))
+    assert ate <= 1.05 * ate_dr
+
+
+@pytest.mark.slow
+def test_a_clean_corridor_prints_no_warning(tmp_path, capsys):
+    """A poster at the image's left border, inside the disparity range, is not found whatever the pan: its
+    edges are not evidence of a wrong pan (the corridor's frames 53–59 once raised edges_not_found)."""
+    from stablemarks.sim.scenario import load_scenario
+
+    seq = write_simulated_sequence(simulate_run(load_scenario("corridor"), seed=11), tmp_path / "corridor")
+    assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    assert "warning:" not in capsys.readouterr().err
 
 
 def test_the_monitor_counts_frames_in_a_row():

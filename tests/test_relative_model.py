@@ -148,3 +148,58 @@ def test_an_aliased_pattern_is_matched_at_the_offset_the_pose_allows():
     assert sorted(got) == sorted(zip(ids, range(4), strict=True))
     assert not report["incompatible"]
     assert COV_POSE[2, 2] < 1e-4  # the pose is confident: the aliased match moves every line by 0.4 m
+
+
+# ------------------------------------------------------------------ entering relative to a landmark held
+def test_landmarks_entered_from_a_held_one_carry_its_covariance():
+    """``x_new = A x + w``: the new landmark's variance is the held one's plus the relative noise, its
+    cross-covariance with everything is the held one's row, and the joint covariance stays PSD."""
+    from stablemarks.estimation import JointEKF, NewLandmark
+
+    from .test_association import COV_POSE, WALL, X0, _ekf
+
+    ekf = _ekf(s=(0.5, 0.9), polarity=(0, 0))
+    held = ekf.landmark_ids[0]
+    col = ekf.state_slice(held).start
+    A = np.zeros((1, len(ekf.state)))
+    A[0, col] = 1.0
+    W = np.array([[0.002**2]])
+    P0 = ekf.cov.copy()
+    (new,) = ekf.add_landmarks_from([NewLandmark.wall(WALL, 0.7, "p1")], A, W)
+    P = ekf.cov
+    j = ekf.state_slice(new).start
+    assert P[j, j] == pytest.approx(P0[col, col] + W[0, 0])
+    np.testing.assert_allclose(P[:j, j], P0[:, col])
+    assert_psd(P)
+    assert isinstance(ekf, JointEKF) and COV_POSE.shape == (3, 3) and X0.shape == (3,)
+
+
+def test_a_boundary_seen_again_does_not_count_as_new_evidence():
+    """Along the room's run, every landmark entered relative to one the filter holds (same wall, same boundary,
+    associated in that frame) is no better known than the held one: the boundary's error is not counted twice."""
+    from stablemarks.online import run_online
+    from stablemarks.sim.source import SimulatedSource
+
+    checked = []
+
+    def observe(frame, est, loc):
+        if frame.index == 0:
+            return
+        held = {int(i) for i in est.record.associated}
+        for i, c in zip(est.entered.ids, est.entered.candidates, strict=True):
+            anchors = [loc.ekf.landmark(h) for h in held if loc.ekf.landmark(h).plane_id == c.plane_id]
+            if anchors:
+                checked.append(i)
+                assert float(loc.ekf.landmark(i).cov[0, 0]) >= min(float(a.cov[0, 0]) for a in anchors) * 0.999
+                # and it is tied to one of them (entered absolutely, they would be nearly independent)
+                P = loc.ekf.cov
+                j = loc.ekf.state_slice(i).start
+                corr = [P[j, loc.ekf.state_slice(a.id).start] / np.sqrt(P[j, j] * P[loc.ekf.state_slice(a.id).start,
+                        loc.ekf.state_slice(a.id).start]) for a in anchors]
+                assert max(np.abs(corr)) > 0.5  # the sign: s from the other edge runs the other way
+
+    from stablemarks.sim.run import simulate_run
+    from stablemarks.sim.scenario import load_scenario
+
+    run_online(SimulatedSource(simulate_run(load_scenario("room"))), start_cov=COV_PRIOR, observers=[observe])
+    assert checked, "no landmark entered beside a held one: the test checked nothing"

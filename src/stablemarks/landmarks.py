@@ -687,10 +687,18 @@ def landmarks_on_plane(
     if cov_X is not None:
         m2 = fit_disagreement(camera, fit, cov_X)
         if m2 > config.fit_gate_chi2:
+            # A wall turned from the map (a wrong pan turns every wall like this): its free edges in view were
+            # expected and are not found. A wall merely shifted (a slip, a kidnap) is left to the widened search.
+            in_view = [e for e in fit.plane.free_edges if np.all(np.isfinite(fit.prediction.edges[e].u))
+                       and fit.prediction.edges[e].window(0, config.search_sigma)[1] >= 0
+                       and fit.prediction.edges[e].window(0, config.search_sigma)[0] <= camera.width - 1]
+            if fit_disagreement(camera, fit, cov_X, slope_only=True) <= SLOPE_GATE_CHI2:
+                in_view = []
             return PlaneLandmarks(fit, [], np.zeros(len(pairs), dtype=bool), [], [
                 (None, f"plane {fit.plane.label!r}: the fitted wall is {100 * fit.a:+.1f} cm off and turned "
                        f"{np.degrees(np.arctan(fit.b)):+.1f}° from the map's (Mahalanobis² {m2:.0f} > "
-                       f"{config.fit_gate_chi2:g} with the pose's uncertainty): another surface in its band, not used")])
+                       f"{config.fit_gate_chi2:g} with the pose's uncertainty): another surface in its band, not used")],
+                in_view)
     members = plane_members(fit, pairs, left_segments, plane_config)
     # A wall in line with another (two partitions in a row) shares its plane: segments beyond the wall's ends
     # fit it too. Only those between the two ends' search windows are the wall's.
@@ -746,6 +754,10 @@ def landmarks_on_plane(
                           rejected, searched)
 
 
+SLOPE_GATE_CHI2 = 10.83
+"""χ²₁(0.999): a fitted wall's slope alone beyond this is turned from the map (see :func:`fit_disagreement`)."""
+
+
 def seen_wall_jacobian(camera: StereoCamera, fit: PlaneFit) -> np.ndarray:
     """``J = ∂(a, b)/∂X`` (2, 3): how an error of the pose moves the map's wall as the camera sees it placed with
     the belief ``fit.X`` (offset ``a`` at ``fit.s0`` [m] and slope ``b`` of the line in the wall's frame), by
@@ -773,11 +785,14 @@ def seen_wall_jacobian(camera: StereoCamera, fit: PlaneFit) -> np.ndarray:
     return J
 
 
-def fit_disagreement(camera: StereoCamera, fit: PlaneFit, cov_X) -> float:
+def fit_disagreement(camera: StereoCamera, fit: PlaneFit, cov_X, *, slope_only: bool = False) -> float:
     """Mahalanobis² of the fitted line ``(a, b)`` against the map's wall (``(0, 0)``) with covariance
-    ``J Σ_X Jᵀ + Σ_R`` (:func:`seen_wall_jacobian`)."""
+    ``J Σ_X Jᵀ + Σ_R`` (:func:`seen_wall_jacobian`); ``slope_only``: of ``b`` alone (1 dof) — a wall turned
+    from the map (a wrong pan turns them all), as opposed to one shifted (a slip or a kidnap moves them)."""
     J = seen_wall_jacobian(camera, fit)
     S = J @ np.asarray(cov_X, dtype=float) @ J.T + fit.cov_R
+    if slope_only:
+        return float(fit.b**2 / S[1, 1]) if S[1, 1] > 0 else 0.0
     r = np.array([fit.a, fit.b])
     try:
         return float(r @ np.linalg.solve(S, r))

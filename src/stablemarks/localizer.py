@@ -35,7 +35,7 @@ from .geometry import SE2, StereoCamera
 from .health import HealthMonitor
 from .maps import Map
 from .methods import Entered, Method, method_named
-from .pipeline import FrameLandmarks, FrontEnd, Regions, check_pair, plane_regions, run_front_end
+from .pipeline import FrameLandmarks, FrontEnd, Regions, check_pair, disparity_limits, plane_regions, run_front_end
 from .viewing import choose_pan
 
 DEFAULT_START_COV = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
@@ -150,15 +150,27 @@ class Estimate:
     entered: Entered = field(default_factory=Entered)
 
 
-def _edges_missing(model: FrameLandmarks | None) -> bool:
+def _edges_missing(model: FrameLandmarks | None, config: Config | None = None, width: int | None = None) -> bool:
     """Whether most free edges expected in this frame were not found where the map puts them: of the edges
     searched (found, rejected or not found) and those on planes predicted in view but not found at all, fewer
     than half were found and accepted. One edge missed now and then (hidden, too far, a ragged border) is not
-    evidence of a wrong pan; most of them are."""
+    evidence of a wrong pan; most of them are. A plane not found at all counts its free edges whose search
+    windows lie where a disparity can be valid (:func:`~stablemarks.pipeline.disparity_limits`): a poster at
+    the image's left border, inside the disparity range, cannot be found whatever the pan."""
     if model is None:
         return False
+    config = config or Config()
+    limits = disparity_limits(config.sad, width) if width else None
+    sigma = config.landmarks.search_sigma
+
+    def searchable(e) -> bool:
+        if not (e.free and np.all(np.isfinite(e.u))):
+            return False
+        return limits is None or all(lim[0] < e.window(img, sigma)[0] and e.window(img, sigma)[1] < lim[1]
+                                     for img, lim in enumerate(limits))
+
     expected = sum(len(m.searched) for m in model.planes)
-    expected += sum(sum(1 for e in pred.edges.values() if e.free and np.all(np.isfinite(e.u)))
+    expected += sum(sum(1 for e in pred.edges.values() if searchable(e))
                     for pred, fit in zip(model.predictions, model.fits, strict=True) if not fit)
     found = sum(len(m.boundaries) for m in model.planes)
     return expected > 0 and 2 * found < expected
@@ -199,6 +211,9 @@ class Localizer:
     def __init__(self, world_map: Map, camera: StereoCamera, *, start_pose=None, start_cov=None,
                  config: Config | None = None, method: str | Method = "stablemarks", prior_landmarks=None):
         self.config = config if config is not None else Config()
+        # The widened search asks whether the walls moved as a whole (a slip, a kidnap): a wall fitted far from
+        # the map is then the evidence, not a second surface in the band, so it is not gated there.
+        self._probe_config = self.config.with_overrides({"landmarks": {"fit_gate_chi2": 1e9}})
         self.world_map = world_map
         self.camera = self.config.camera(camera)
         self.method = method if isinstance(method, Method) else method_named(method)
@@ -258,21 +273,24 @@ class Localizer:
         return path
 
     # ----------------------------------------------------------------- steps
-    def _widen_to_fit(self, pattern: list[tuple[int, int]], front: FrontEnd, pan: float) -> float:
+    def _widen_to_fit(self, pattern: list[tuple[int, int]], front: FrontEnd, pan: float,
+                      ekf: JointEKF | None = None) -> tuple[float, bool]:
         """Widen the position covariance by factors of 4 until ``pattern`` (landmark id, pair index) fits as a
         typical sample (its joint NIS at most its mean, ``2 · len(pattern)``; merely inside the 99 % gate would
         leave the pose overconfident after the update), up to ``health.max_inflation``; returns the factor used.
         Only the position: a wheel slip or a kidnap moves the robot, and a heading that the images would turn far
-        beyond its odometry is more likely a wrong head pan, which must not be absorbed into the pose."""
+        beyond its odometry is more likely a wrong head pan, which must not be absorbed into the pose. Returns the
+        factor and whether the pattern fits; ``ekf``: widen that filter instead of the localizer's (a trial)."""
+        ekf = self.ekf if ekf is None else ekf
         pairs = front.kept_pairs
         measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
         factor = 1.0
         while factor * 4.0 <= self.config.health.max_inflation:
-            self.ekf.inflate_pose(4.0, position_only=True)
+            ekf.inflate_pose(4.0, position_only=True)
             factor *= 4.0
-            if self.ekf.joint_nis(pattern, measured, pan) <= 2 * len(pattern):
-                break
-        return factor
+            if ekf.joint_nis(pattern, measured, pan) <= 2 * len(pattern):
+                return factor, True
+        return factor, False
 
     def _missed_landmarks(self, model: FrameLandmarks | None, assoc, pan: float, dropped: list[int]) -> list[int]:
         """Wall landmarks predicted in view on a wall modelled in this frame (a boundary found) but not
@@ -364,23 +382,31 @@ class Localizer:
                 record.warnings, record.n_candidates = list(model.warnings), len(model.candidates)
                 record.n_selected = len(model.selected)
             record.n_pairs = len(front.kept_pairs)
-            edges_missing = _edges_missing(model)
+            edges_missing = _edges_missing(model, self.config, self.camera.width)
             pan_suspect = self.health.suspect_edges(edges_missing)
             report: dict = {}
             assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report)
-            if not pan_suspect and model is not None and (edges_missing or not assoc) and self.ekf.visible(pan):
+            if model is not None and (edges_missing or not assoc) and self.ekf.visible(pan):
                 # the walls are not where the prediction puts them: look again with wider gates (a slip or a
-                # kidnap moves them beyond the bands of a confident pose)
+                # kidnap moves them beyond the bands of a confident pose). Also while the pan is suspect: walls
+                # that a shift of the position alone explains are a kidnap, not a wrong pan (below).
                 wide = method.model(front, cam_k, self.world_map, self.ekf.pose,
-                                    self.ekf.cov_pose * self.config.health.search_inflation, self.config)
+                                    self.ekf.cov_pose * self.config.health.search_inflation, self._probe_config)
                 wide_report: dict = {}
                 method.associate(self.ekf, front, wide, pan, cam_k, wide_report)
                 if wide_report.get("incompatible") and not wide_report.get("compatible"):
                     model, report = wide, wide_report
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
                 max(len(m) for m in report["incompatible"]) >= self.config.health.min_pattern
+            if disagree and pan_suspect:
+                # a wrong pan turns the walls; only a pattern that a position shift makes fit is a kidnap
+                probe = self.ekf.copy()
+                _, fits = self._widen_to_fit(max(report["incompatible"], key=len), front, pan, probe)
+                disagree = fits
+                if fits:
+                    pan_suspect = edges_missing = False
             if disagree and self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
-                record.inflation = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
+                record.inflation, _ = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
                 assoc = method.associate(self.ekf, front, model, pan, cam_k)
             assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma)
             dropped += self._missed_landmarks(model, assoc, pan, dropped)
@@ -404,7 +430,7 @@ class Localizer:
             timings["associate_update"] = t3 - t2
             if not pan_suspect:
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
-                                       self.config)
+                                       self.config, anchors={int(j): int(i) for i, j in assoc})
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
             timings["select"] = time.perf_counter() - t3
         self._pan = pan

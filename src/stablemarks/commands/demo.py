@@ -40,7 +40,7 @@ def run(args) -> int:
     from ..sim.scenario import load_scenario
     from ..viz.scene import save_scene_figure
     from ._tables import landmark_table, match_table1, summary_counts, table1_comparison
-    from .select import write_frame_figures
+    from .select import frame_figure_names, write_frame_figures
 
     console = make_console()
     out = check_out_dir(args.out)
@@ -71,6 +71,7 @@ def run(args) -> int:
         console.print(f"[yellow]warning:[/] {w}")
     console.print(landmark_table(result.candidates, mm=True, title="stablemarks, first view"))
     summary = {}
+    matches = None
     if scenario.name == "lab":
         matches, extra = match_table1(result.candidates, TABLE1_PLANES)
         console.print(table1_comparison(matches))
@@ -84,12 +85,13 @@ def run(args) -> int:
         )
     truth = {"points": [[e.x, e.y] for e in frame.truth.edges if e.kind == "feature" and e.visible_l]}
     write_landmarks(out, result.candidates, extra={"pose": X0.tolist(), "cov_pose": cov0.tolist()})
-    write_frame_figures(out, frame.left, frame.right, result, scenario.map, camera, truth)
-    console.print(f"wrote {out}/landmarks.csv, landmarks.json, fig5_segments.png, fig6_planes.png, "
-                  f"fig7_uncertainty.png, map.png")
+    write_frame_figures(out, frame.left, frame.right, result, scenario.map, camera, truth, matches)
+    console.print(f"wrote {out}/landmarks.csv, " + ", ".join(
+        ["landmarks.json", "frame_000000_left.png", "frame_000000_right.png", *frame_figure_names(result), "map.png"]))
     if not args.no_motion:
         summary["motion"] = _motion(console, scenario, sim, out, cov0, config)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    console.print(f"wrote {out}/summary.json")
     return 0
 
 

@@ -66,17 +66,25 @@ def run(args) -> int:
     console.print(landmark_table(result.candidates, mm=args.mm))
     if not args.no_figures:
         write_frame_figures(out, left, right, result, world_map, camera)
-    console.print(f"wrote {out / 'landmarks.csv'} and {out / 'landmarks.json'}"
-                  + ("" if args.no_figures else ", fig5_segments.png, fig6_planes.png, fig7_uncertainty.png"))
     (out / "timings.json").write_text(json.dumps({**result.front.timings, **result.timings}, indent=2))
+    figures = [] if args.no_figures else frame_figure_names(result)
+    console.print(f"wrote {out / 'landmarks.csv'}, " + ", ".join(["landmarks.json", "timings.json", *figures]))
     return 0
 
 
-def write_frame_figures(out: Path, left, right, result, world_map, camera, truth=None) -> None:
+def frame_figure_names(result) -> list[str]:
+    """The files :func:`write_frame_figures` writes for ``result``."""
+    names = ["fig5_segments.png", "fig6_planes.png", "fig7_uncertainty.png"]
+    return names + (["fig7_along_walls.png"] if result.candidates else [])
+
+
+def write_frame_figures(out: Path, left, right, result, world_map, camera, truth=None, matches=None) -> None:
+    """Figs 5–7 of one frame; ``matches`` (Table 1's rows against our candidates) numbers the features along the
+    walls as the paper does."""
     from ..viz.frames import figure5, figure6, figure7, zoom_figure7
 
     figure5(out / "fig5_segments.png", left, right, result.front)
     figure6(out / "fig6_planes.png", left, result)
     figure7(out / "fig7_uncertainty.png", result, world_map, camera, truth)
     if result.candidates:
-        zoom_figure7(out / "fig7_along_walls.png", result, sorted({c.plane_id for c in result.candidates}))
+        zoom_figure7(out / "fig7_along_walls.png", result, sorted({c.plane_id for c in result.candidates}), matches)

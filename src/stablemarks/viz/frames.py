@@ -272,7 +272,7 @@ def make_figure7(result, world_map, camera=None, truth: dict | None = None):
     ys = [c.P[1] for c in result.candidates] + [X[1]]
     ax.set_xlim(min(xs) - 1.0, max(xs) + 1.0)
     ax.set_ylim(min(ys) - 0.5, max(ys) + 1.0)
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.grid(alpha=0.3)
@@ -296,7 +296,7 @@ def make_figure7(result, world_map, camera=None, truth: dict | None = None):
         lo, hi = lo - pad, hi + pad
         z.set_xlim(lo[0], hi[0])
         z.set_ylim(lo[1], hi[1])
-        z.set_aspect("equal", adjustable="datalim")
+        z.set_aspect("equal", adjustable="box")
         z.grid(alpha=0.3)
         z.tick_params(labelsize=7)
         span = float(np.max(hi - lo))

@@ -131,12 +131,12 @@ def make_figure10(result, every: int = 2, zoom: bool = True):
         paths(z)
         z.set_xlim(lo[0], hi[0])
         z.set_ylim(lo[1], hi[1])
-        z.set_aspect("equal", adjustable="datalim")
+        z.set_aspect("equal", adjustable="box")
         z.grid(alpha=0.3)
         z.set_xlabel("x [m]")
         z.set_ylabel("y [m]")
         z.set_title("zoom on the path (equal axes)", fontsize=10)
-        z.legend(handles=path_handles, loc="upper left", bbox_to_anchor=(0.0, -0.09), fontsize=8, frameon=False)
+        z.legend(handles=path_handles, loc="upper right", bbox_to_anchor=(1.0, -0.09), fontsize=8, frameon=False)
     fig.subplots_adjust(left=0.07, right=0.98, top=0.94, bottom=0.2, wspace=0.25)
     return fig
 

@@ -231,3 +231,54 @@ def test_fuse_point_equals_the_numpy_reference(frames):
                     assert g.shape == w.shape
                     np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-12 * np.abs(w).max(), err_msg=name)
     assert n_fits >= 6
+
+
+# ------------------------------------------------------------------ the disparity filter
+def filter_pairs_reference(pairs, left_segments, disp, mask, tolerance, min_support, search_radius):
+    """The former :func:`filter_pairs` body (after its checks), in NumPy."""
+    n = len(pairs)
+    if n == 0:
+        return np.zeros(0, bool)
+    own = left_segments.subset(pairs.left_index)
+    pix, counts = own.pixel_uv, np.diff(own.pixel_offsets)
+    H, W = disp.shape
+    u, v = pix[:, 0].astype(np.int64), pix[:, 1].astype(np.int64)
+    cols = u[:, None] + np.arange(-search_radius, search_radius + 1)[None, :]
+    inside = (cols >= 0) & (cols < W)
+    flat = v[:, None] * W + np.clip(cols, 0, W - 1)
+    window = np.take(disp.reshape(-1), flat)
+    usable = inside & np.take(mask.reshape(-1), flat) & np.isfinite(window)
+    d_pair = np.repeat(pairs.disparity, counts)[:, None]
+    supports = np.any(usable & (np.abs(np.where(usable, window, 0.0) - d_pair) <= tolerance), axis=1)
+    owner = np.repeat(np.arange(n), counts)
+    support = np.bincount(owner, weights=supports, minlength=n) / np.maximum(counts, 1)
+    return (support >= min_support) & (counts > 0)
+
+
+def test_filter_pairs_equals_the_numpy_reference(frames):
+    """:func:`filter_pairs` (one numba loop over the pairs' pixels) keeps the pairs the former NumPy code kept, on
+    the scenarios' dense and region disparity images, with several tolerances, supports and radii."""
+    from stablemarks.errors import ImageError
+    from stablemarks.vision.filter import filter_pairs
+
+    config = Config()
+    n_dropped = n_kept = 0
+    for name, k, left, right, camera, world_map, X in frames:
+        sl, sr = extract_vertical_segments(left), extract_vertical_segments(right)
+        pairs = match_segments(sl, sr)
+        reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
+        for disp in (compute_disparity(left, right), run_front_end(left, right, config, reg).disparity):
+            for tol, support, radius in ((1.0, 0.5, 2), (0.3, 0.8, 0), (2.0, 0.2, 5)):
+                got = filter_pairs(pairs, sl, disp.left, disp.valid, tol, support, search_radius=radius)
+                want = filter_pairs_reference(pairs, sl, disp.left, disp.valid, tol, support, radius)
+                assert np.array_equal(got, want), (name, k, tol, support, radius)
+                n_kept += int(got.sum())
+                n_dropped += int((~got).sum())
+            # float64 and float16 images: the same decisions as the reference on them
+            for dtype in (np.float64, np.float16):
+                d = disp.left.astype(dtype)
+                assert np.array_equal(filter_pairs(pairs, sl, d, disp.valid),
+                                      filter_pairs_reference(pairs, sl, d, disp.valid, 1.0, 0.5, 2))
+    assert n_kept > 50 and n_dropped > 50
+    with pytest.raises(ImageError, match="outside"):
+        filter_pairs(pairs, sl, disp.left[:100], disp.valid[:100])

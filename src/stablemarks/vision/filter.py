@@ -8,6 +8,7 @@ area-based stereo matching."
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..errors import ImageError, InputError, expected
 from .segment_stereo import SegmentPairs
@@ -79,20 +80,43 @@ def filter_pairs(
                      where="pairs.left_index")
         )  # fmt: skip
 
-    own = left_segments.subset(li)  # segment k is pair k's left segment
-    pix, counts = own.pixel_uv, np.diff(own.pixel_offsets)
     H, W = disp.shape
-    u, v = pix[:, 0].astype(np.int64), pix[:, 1].astype(np.int64)
-    if pix.size and (u.min() < 0 or u.max() >= W or v.min() < 0 or v.max() >= H):
+    if disp.dtype not in (np.float32, np.float64):
+        disp = disp.astype(np.float64)  # the same values (numba has no float16)
+    li = np.ascontiguousarray(li, dtype=np.int64)
+    support, counts, outside = _support(np.ascontiguousarray(disp), np.ascontiguousarray(mask),
+                                        left_segments.pixel_offsets, left_segments.pixel_uv, li,
+                                        np.ascontiguousarray(pairs.disparity, dtype=np.float64), float(tolerance),
+                                        int(search_radius))  # fmt: skip
+    if outside:
         raise ImageError(expected(f"segment pixels inside the {W}x{H} disparity image", "pixels outside it",
                                   where="left_segments"))  # fmt: skip
-    cols = u[:, None] + np.arange(-search_radius, search_radius + 1)[None, :]  # (P, 2r + 1)
-    inside = (cols >= 0) & (cols < W)
-    flat = v[:, None] * W + np.clip(cols, 0, W - 1)
-    window = np.take(disp.reshape(-1), flat)
-    usable = inside & np.take(mask.reshape(-1), flat) & np.isfinite(window)
-    d_pair = np.repeat(pairs.disparity, counts)[:, None]
-    supports = np.any(usable & (np.abs(np.where(usable, window, 0.0) - d_pair) <= tolerance), axis=1)
-    owner = np.repeat(np.arange(n), counts)
-    support = np.bincount(owner, weights=supports, minlength=n) / np.maximum(counts, 1)
     return (support >= min_support) & (counts > 0)
+
+
+@njit(cache=True)
+def _support(disp, mask, offsets, pixel_uv, left_index, d_pair, tolerance, radius):  # pragma: no cover - numba
+    """Per pair k: the fraction of its left segment's pixels ``(u, v)`` with a valid, finite disparity within
+    ``tolerance`` of ``d_pair[k]`` among columns ``u − radius … u + radius`` of row v (in the image), and its
+    pixel count; and whether any of those pixels lies outside the image (then nothing else is meaningful)."""
+    H, W = disp.shape
+    n = left_index.shape[0]
+    support = np.zeros(n)
+    counts = np.zeros(n, np.int64)
+    for k in range(n):
+        seg = left_index[k]
+        a, b = offsets[seg], offsets[seg + 1]
+        counts[k] = b - a
+        hits = 0.0
+        for p in range(a, b):
+            u = np.int64(pixel_uv[p, 0])
+            v = np.int64(pixel_uv[p, 1])
+            if u < 0 or u >= W or v < 0 or v >= H:
+                return support, counts, True
+            for c in range(max(0, u - radius), min(W, u + radius + 1)):
+                x = disp[v, c]
+                if mask[v, c] and np.isfinite(x) and abs(np.float64(x) - d_pair[k]) <= tolerance:
+                    hits += 1.0
+                    break
+        support[k] = hits / max(b - a, 1)
+    return support, counts, False

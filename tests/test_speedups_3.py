@@ -282,3 +282,30 @@ def test_filter_pairs_equals_the_numpy_reference(frames):
     assert n_kept > 50 and n_dropped > 50
     with pytest.raises(ImageError, match="outside"):
         filter_pairs(pairs, sl, disp.left[:100], disp.valid[:100])
+
+
+# ------------------------------------------------------------------ segments sorted by column
+def test_segments_are_sorted_as_by_subset(frames):
+    """:func:`extract_vertical_segments` puts the segments in column order with their pixel blocks in one pass:
+    the same :class:`Segments`, field by field and dtype by dtype, as the former ``subset(argsort(u))`` of the
+    unsorted ones."""
+    from stablemarks.vision import segments as S
+
+    for name, k, left, right, *_ in frames:
+        for img in (left, right, left.astype(np.float32)):
+            got = extract_vertical_segments(img)
+            # the former way: the unsorted segments, then subset
+            gx = S.cv2.Sobel(img, S.cv2.CV_16S if img.dtype == np.uint8 else S.cv2.CV_32F, 1, 0, ksize=3)
+            c = S.SegmentConfig()
+            thr = np.int16(np.ceil(c.gradient_threshold)) if img.dtype == np.uint8 else np.float32(c.gradient_threshold)
+            edges = S._detect_and_link(gx, thr, int(c.max_drift), int(c.max_gap))
+            u, slope, v_top, v_bottom, pol, con, off, pix = S._fit_segments(
+                gx, *edges, float(c.min_length), float(c.max_residual), float(np.tan(c.max_angle)))
+            unsorted = S.Segments(u=u, slope=slope, v_top=v_top, v_bottom=v_bottom, polarity=pol, contrast=con,
+                                  n_pixels=np.diff(off), pixel_offsets=off, pixel_uv=pix)
+            want = unsorted.subset(np.argsort(u, kind="stable"))
+            assert len(got) > 5
+            for f in ("u", "slope", "v_top", "v_bottom", "polarity", "contrast", "n_pixels", "pixel_offsets",
+                      "pixel_uv"):
+                a, b = getattr(got, f), getattr(want, f)
+                assert a.dtype == b.dtype and np.array_equal(a, b), (name, k, f)

@@ -265,11 +265,29 @@ def extract_vertical_segments(image: np.ndarray, config: SegmentConfig = Segment
     u, slope, v_top, v_bottom, polarity, contrast, offsets, pixel_uv = _fit_segments(
         gx, *edges, float(config.min_length), float(config.max_residual), float(np.tan(config.max_angle))
     )
-    segments = Segments(
-        u=u, slope=slope, v_top=v_top, v_bottom=v_bottom, polarity=polarity, contrast=contrast,
-        n_pixels=np.diff(offsets), pixel_offsets=offsets, pixel_uv=pixel_uv,
+    order = np.argsort(u, kind="stable")  # by column, each segment's pixels moved along in one pass
+    offsets, pixel_uv = _reorder_pixels(offsets, pixel_uv, order)
+    return Segments(
+        u=u[order], slope=slope[order], v_top=v_top[order], v_bottom=v_bottom[order], polarity=polarity[order],
+        contrast=contrast[order], n_pixels=np.diff(offsets), pixel_offsets=offsets, pixel_uv=pixel_uv,
     )  # fmt: skip
-    return segments.subset(np.argsort(u, kind="stable"))
+
+
+@njit(cache=True)
+def _reorder_pixels(offsets, pixel_uv, order):  # pragma: no cover - numba
+    """The pixel blocks of segments ``order[0], order[1], …`` one after the other: their offsets (int64) and
+    pixels (what :meth:`Segments.subset` makes of them)."""
+    n = order.shape[0]
+    out_offsets = np.zeros(n + 1, np.int64)
+    for i in range(n):
+        out_offsets[i + 1] = out_offsets[i] + offsets[order[i] + 1] - offsets[order[i]]
+    out = np.empty((out_offsets[n], 2), pixel_uv.dtype)
+    for i in range(n):
+        a = offsets[order[i]]
+        for j in range(out_offsets[i + 1] - out_offsets[i]):
+            out[out_offsets[i] + j, 0] = pixel_uv[a + j, 0]
+            out[out_offsets[i] + j, 1] = pixel_uv[a + j, 1]
+    return out_offsets, out
 
 
 @njit(cache=True)

@@ -143,3 +143,13 @@ def test_world_only_walls_stay_out_of_the_map(lab_data):
     sc = parse(edited(lab_data, lambda d: d["walls"][2].update(in_map=False)))
     assert "back-wall" not in {p.id for p in sc.map}
     assert sc.wall("back-wall").in_map is False
+
+
+def test_a_folder_named_like_a_builtin_scenario_does_not_shadow_it(tmp_path, monkeypatch):
+    """`stablemarks eval office --out office` leaves a folder `office`; the next `eval office` still means the
+    built-in scenario (a file of that name would win)."""
+    from stablemarks.sim.scenario import load_scenario
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "office").mkdir()
+    assert load_scenario("office").name == "office"

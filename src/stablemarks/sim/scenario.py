@@ -302,7 +302,8 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load a built-in scenario by name (``"lab"``) or a scenario file by path, and validate it."""
     text = str(name_or_path)
     builtin = SCENARIO_DIR / f"{text}.yaml"
-    if _ID.match(text) and builtin.is_file() and not Path(text).exists():
+    # a file of that name in the working directory wins; a folder of that name (a run's output) does not
+    if _ID.match(text) and builtin.is_file() and not Path(text).is_file():
         return parse_scenario(read_yaml(builtin, "scenario file"), builtin.name, default_name=text)
     path = Path(name_or_path)
     if not path.exists() and path.suffix == "":

@@ -57,7 +57,7 @@ class LandmarkConfig:
             raise InputError(expected("'measured' or 'model'", self.filter_boundary_sigma,
                                       where="landmarks.filter_boundary_sigma"))
         for name in ("off_wall_sigma", "row_sigma_px", "max_range", "max_incidence_deg", "boundary_gate_sigma",
-                     "fit_gate_chi2"):
+                     "fit_gate_chi2", "map_offset_sigma", "map_angle_sigma_deg"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0):
                 raise InputError(expected("a positive number", v, where=f"landmarks.{name}"))
@@ -122,9 +122,15 @@ class LandmarkConfig:
     pose's, projected on the wall) disagrees with the map: nothing is modelled from it in that frame."""
     fit_gate_chi2: float = 13.8
     """A fitted wall line ``(a, b)`` (offset and slope from the map's wall, seen through the belief) must agree
-    with the map given the pose covariance and the fit's own: Mahalanobis² at most this (χ²₂, 0.999). A
+    with the map given the pose covariance, the fit's own and the map's (``map_offset_sigma``,
+    ``map_angle_sigma_deg``): Mahalanobis² at most this (χ²₂, 0.999). A
     line that does not is another surface caught in a wide band (a wall behind a free-standing screen when
     the heading is uncertain), bent and shifted far beyond its σ: nothing is modelled from it in that frame."""
+    map_offset_sigma: float = 0.02
+    """How far [m] a mapped wall may lie from the real one along its normal (σ), for the fitted-wall gate: a
+    map drawn by hand or extracted from an occupancy grid (``map-walls``: 2 cm, 0.5°) is not exact."""
+    map_angle_sigma_deg: float = 0.5
+    """How far [deg] a mapped wall's direction may be from the real one (σ), for the fitted-wall gate."""
     min_edge_step_sigma: float = 3.0
     """A free edge is searched only where the map puts something at a different depth just beyond it: the
     disparity step the map predicts across the edge must reach this many σ of the disparity noise
@@ -685,14 +691,15 @@ def landmarks_on_plane(
     ``border_sigma_px``: see :func:`search_boundary`.
     """
     if cov_X is not None:
-        m2 = fit_disagreement(camera, fit, cov_X)
+        cov_map = np.diag([config.map_offset_sigma, np.tan(np.radians(config.map_angle_sigma_deg))]) ** 2
+        m2 = fit_disagreement(camera, fit, cov_X, cov_map=cov_map)
         if m2 > config.fit_gate_chi2:
             # A wall turned from the map (a wrong pan turns every wall like this): its free edges in view were
             # expected and are not found. A wall merely shifted (a slip, a kidnap) is left to the widened search.
             in_view = [e for e in fit.plane.free_edges if np.all(np.isfinite(fit.prediction.edges[e].u))
                        and fit.prediction.edges[e].window(0, config.search_sigma)[1] >= 0
                        and fit.prediction.edges[e].window(0, config.search_sigma)[0] <= camera.width - 1]
-            if fit_disagreement(camera, fit, cov_X, slope_only=True) <= SLOPE_GATE_CHI2:
+            if fit_disagreement(camera, fit, cov_X, slope_only=True, cov_map=cov_map) <= SLOPE_GATE_CHI2:
                 in_view = []
             return PlaneLandmarks(fit, [], np.zeros(len(pairs), dtype=bool), [], [
                 (None, f"plane {fit.plane.label!r}: the fitted wall is {100 * fit.a:+.1f} cm off and turned "
@@ -785,12 +792,16 @@ def seen_wall_jacobian(camera: StereoCamera, fit: PlaneFit) -> np.ndarray:
     return J
 
 
-def fit_disagreement(camera: StereoCamera, fit: PlaneFit, cov_X, *, slope_only: bool = False) -> float:
+def fit_disagreement(camera: StereoCamera, fit: PlaneFit, cov_X, *, slope_only: bool = False,
+                     cov_map=None) -> float:
     """Mahalanobis² of the fitted line ``(a, b)`` against the map's wall (``(0, 0)``) with covariance
     ``J Σ_X Jᵀ + Σ_R`` (:func:`seen_wall_jacobian`); ``slope_only``: of ``b`` alone (1 dof) — a wall turned
-    from the map (a wrong pan turns them all), as opposed to one shifted (a slip or a kidnap moves them)."""
+    from the map (a wrong pan turns them all), as opposed to one shifted (a slip or a kidnap moves them).
+    ``cov_map`` (2, 2): the map wall's own uncertainty in ``(a, b)`` (default none)."""
     J = seen_wall_jacobian(camera, fit)
     S = J @ np.asarray(cov_X, dtype=float) @ J.T + fit.cov_R
+    if cov_map is not None:
+        S = S + np.asarray(cov_map, dtype=float)
     if slope_only:
         return float(fit.b**2 / S[1, 1]) if S[1, 1] > 0 else 0.0
     r = np.array([fit.a, fit.b])

@@ -430,7 +430,7 @@ class Localizer:
             timings["associate_update"] = t3 - t2
             if not pan_suspect:
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
-                                       self.config, anchors={int(j): int(i) for i, j in assoc})
+                                       self.config)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
             timings["select"] = time.perf_counter() - t3
         self._pan = pan

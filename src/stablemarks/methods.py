@@ -99,18 +99,14 @@ class Method:
         return keep, dropped
 
     def enter(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, used_pairs: set[int],
-              camera: StereoCamera, world_map: Map, frame: int, config: Config,
-              anchors: dict[int, int] | None = None) -> Entered:
-        """Enter the frame's new wall landmarks, jointly per boundary (:func:`enter_wall_landmarks`); ``anchors``
-        (pair index → landmark id): this frame's associations, which new landmarks of the same boundary are
-        entered relative to."""
+              camera: StereoCamera, world_map: Map, frame: int, config: Config) -> Entered:
+        """Enter the frame's new wall landmarks, jointly per boundary (:func:`enter_wall_landmarks`)."""
         fresh = [c for c in self.take(model) if c.pair not in used_pairs and not is_duplicate(ekf, c)]
         pairs = front.kept_pairs
         polarity = front.left_segments.polarity[pairs.left_index]
         centre = camera.optical_centres(ekf.pose)[0]
         along = {c.pair: int(wall_polarity(int(polarity[c.pair]), world_map[c.plane_id], centre)) for c in fresh}
-        return enter_wall_landmarks(ekf, world_map, fresh, frame, along, config.landmarks.filter_boundary_sigma,
-                                    anchors, model.candidates if model is not None else ())
+        return enter_wall_landmarks(ekf, world_map, fresh, frame, along, config.landmarks.filter_boundary_sigma)
 
 
 class PlaneNoSelection(Method):
@@ -131,7 +127,7 @@ class AllSegments(Method):
     def model(self, front, camera, world_map, X, cov_X, config) -> None:
         return None
 
-    def enter(self, ekf, front, model, used_pairs, camera, world_map, frame, config, anchors=None) -> Entered:
+    def enter(self, ekf, front, model, used_pairs, camera, world_map, frame, config) -> Entered:
         pairs = front.kept_pairs
         idx = [j for j in range(len(pairs)) if j not in used_pairs]
         ids = enter_point_landmarks(ekf, camera, pairs, idx, frame)
@@ -158,31 +154,8 @@ def method_named(name: str) -> Method:
 
 
 # ------------------------------------------------------------------ entering landmarks
-def _inward_sign(edge: str) -> float:
-    """``ds/da``: a wall landmark's ``s`` from ``p1`` runs along the wall's direction, from ``p2`` against it."""
-    return 1.0 if edge == "p1" else -1.0
-
-
-def _anchor(ekf: JointEKF, group, anchors: dict[int, int], by_pair: dict) -> tuple[int, object] | None:
-    """The landmark already in the filter, associated this frame with a line modelled from the same boundary as
-    ``group``, whose variance is smallest: ``(id, its candidate)``; None if there is none."""
-    best = None
-    for pair, lid in anchors.items():
-        c = by_pair.get(pair)
-        if c is None or c.plane_id != group[0].plane_id or c.edge != group[0].edge or c.shared_jacobian is None:
-            continue
-        lm = ekf.landmark(lid)
-        if lm.kind != "wall" or lm.plane_id != c.plane_id:
-            continue
-        var = float(lm.cov[0, 0])
-        if best is None or var < best[0]:
-            best = (var, lid, c)
-    return None if best is None else (best[1], best[2])
-
-
 def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
-                         polarity: dict[int, int] | None = None, boundary_sigma: str = "model",
-                         anchors: dict[int, int] | None = None, model_candidates=()) -> Entered:
+                         polarity: dict[int, int] | None = None, boundary_sigma: str = "model") -> Entered:
     """Enter candidates as wall landmarks, jointly per boundary: ``Σ = J Σ_shared Jᵀ + diag(σ_own²)`` from each
     candidate's error model (the fitted line and the boundary shared; see :class:`~stablemarks.landmarks.Candidate`),
     or ``σ_b² 11ᵀ + diag(σ_f²)`` for candidates without one (DESIGN §4).
@@ -190,18 +163,8 @@ def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
     ``polarity`` maps a candidate's pair index to its edge's polarity along the wall
     (:func:`~stablemarks.estimation.wall_polarity`); ``boundary_sigma``: which σ_b
     (``landmarks.filter_boundary_sigma``). Returns what entered, group by group.
-
-    ``anchors`` (pair index → landmark id, this frame's associations) and ``model_candidates`` (this frame's
-    candidates): a group whose boundary also placed a line the filter already holds as a landmark ``L`` enters
-    *relative to L* (:meth:`JointEKF.add_landmarks_from`): ``s_i = s_L + (d_i − d_L)``, both distances from this
-    frame's boundary, whose error cancels in the difference. The boundary of one free edge is found with much
-    the same error frame after frame (the same physical border, the same SAD window); entering each frame's
-    landmarks with it as fresh, independent evidence would let the filter count one edge's position many times
-    over (the office's landmarks settled 20–35 mm off with σ 5 mm). ``priors`` keeps the absolute model.
     """
     polarity = polarity or {}
-    anchors = anchors or {}
-    by_pair = {c.pair: c for c in model_candidates}
     out = Entered()
     groups: dict[tuple[str, str], list] = {}
     for c in candidates:
@@ -220,22 +183,8 @@ def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
                 sb = group[0].sigma_b_measured
             sf = np.array([c.sigma_f for c in group])
             cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
-        ref = _anchor(ekf, group, anchors, by_pair) if all(c.shared_jacobian is not None for c in group) else None
-        if ref is None:
-            new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
-            added = ekf.add_landmarks(new, cov, frame=frame)
-        else:
-            lid, cL = ref
-            lm = ekf.landmark(lid)
-            sign = _inward_sign(edge)
-            shift = sign * (float(plane.along(lm.position)) - float(plane.along(cL.P)))
-            new = [NewLandmark.wall(plane, c.s + shift, edge, c.z_low, c.z_high, polarity.get(c.pair, 0))
-                   for c in group]
-            A = np.zeros((len(group), len(ekf.state)))
-            A[:, ekf.state_slice(lid).start] = sign * _inward_sign(lm.edge)
-            dJ = J - cL.shared_jacobian[None, :]
-            W = dJ @ cL.shared_cov @ dJ.T + np.diag(own**2) + cL.sigma_own**2
-            added = ekf.add_landmarks_from(new, A, 0.5 * (W + W.T), frame=frame)
+        new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
+        added = ekf.add_landmarks(new, cov, frame=frame)
         out.priors.append((added, [float(c.s) for c in group], cov))
         out.ids += added
         out.candidates += group

@@ -584,36 +584,6 @@ class JointEKF:
         self._reindex()
         return ids
 
-    def add_landmarks_from(self, new: Sequence[NewLandmark], A, W, *, frame: int | None = None) -> list[int]:
-        """Append landmarks whose values are a linear function of the current state plus independent noise,
-        ``x_new = A x + w``, ``w ~ N(0, W)``: ``P_new,new = A P Aᵀ + W`` and ``P_x,new = P Aᵀ`` (EKF-SLAM's
-        initialisation relative to what the filter already holds; the values are taken from ``new``).
-
-        ``A`` (D, N) over the state in its current order (:attr:`state`), ``W`` (D, D). Returns the new ids."""
-        new = list(new)
-        if not new:
-            return []
-        N = len(self._x)
-        D = sum(lm.dim for lm in new)
-        A = _matrix(A, (D, N), "add_landmarks_from.A")
-        W = _covariance(W, D, "add_landmarks_from.W")
-        PA = self._P @ A.T
-        C = A @ PA + W
-        ids = list(range(self._next_id, self._next_id + len(new)))
-        P = np.zeros((N + D, N + D))
-        P[:N, :N] = self._P
-        P[:N, N:] = PA
-        P[N:, :N] = PA.T
-        P[N:, N:] = 0.5 * (C + C.T)
-        self._P = P
-        self._x = np.concatenate([self._x, np.concatenate([np.asarray(lm.value, float) for lm in new])])
-        for i, lm in zip(ids, new, strict=True):
-            self._tracks[i] = _Track(i, lm.kind, lm.plane, lm.edge, lm.z_low, lm.z_high, frame, frame,
-                                     polarity=lm.polarity)
-        self._next_id = max(ids) + 1
-        self._reindex()
-        return ids
-
     def remove_landmark(self, landmark_id: int) -> None:
         """Drop a landmark (marginalise it out: delete its rows and columns)."""
         r = int(self._rows([landmark_id], "remove_landmark")[0])

@@ -148,3 +148,46 @@ def test_an_aliased_pattern_is_matched_at_the_offset_the_pose_allows():
     assert sorted(got) == sorted(zip(ids, range(4), strict=True))
     assert not report["incompatible"]
     assert COV_POSE[2, 2] < 1e-4  # the pose is confident: the aliased match moves every line by 0.4 m
+
+
+def _reference_error_model(camera, fit, boundary, u_left, u_right, t, step_px=0.01, step_line=1e-4):
+    """The error model one central difference at a time through the estimator (the former implementation)."""
+    X, cov_ub = fit.X, boundary.cov_uv
+    u_f = np.stack([u_left, u_right], axis=-1)
+
+    def distances(line, ub, uf):
+        P_f, cov_f = camera.triangulate(uf[:, 0], uf[:, 1], X)
+        P_b, cov_b = camera.triangulate(ub[0], ub[1], X, cov_uv=cov_ub)
+        return (line.fuse_point(P_f, cov_f)[0] - line.fuse_point(P_b, cov_b)[0]) @ t
+
+    ub0 = np.asarray(boundary.u, dtype=float)
+    J = np.empty((len(u_f), 4))
+    for i, key in enumerate(("a", "b")):
+        hi, lo = (replace(fit, **{key: getattr(fit, key) + d}) for d in (step_line, -step_line))
+        J[:, i] = (distances(hi, ub0, u_f) - distances(lo, ub0, u_f)) / (2 * step_line)
+    own = np.zeros(len(u_f))
+    for i in range(2):
+        e = np.zeros(2)
+        e[i] = step_px
+        J[:, 2 + i] = (distances(fit, ub0 + e, u_f) - distances(fit, ub0 - e, u_f)) / (2 * step_px)
+        own += ((distances(fit, ub0, u_f + e) - distances(fit, ub0, u_f - e)) / (2 * step_px) * camera.sigma_img) ** 2
+    return J, np.sqrt(own)
+
+
+def test_the_batched_error_model_equals_one_difference_at_a_time(lab_view):
+    """All perturbations in one batch (and the offset's step as a shift along the normal) give the same numbers as
+    the differences taken one by one."""
+    cam, fl, _ = lab_view
+    checked = 0
+    for plane in fl.planes:
+        for b in plane.boundaries:
+            cands = [c for c in plane.candidates if c.edge == b.edge]
+            if not cands:
+                continue
+            u = np.array([[c.u_left, c.u_right] for c in cands])
+            J, own, _ = relative_error_model(cam, plane.fit, b, u[:, 0], u[:, 1], b.inward)
+            J_ref, own_ref = _reference_error_model(cam, plane.fit, b, u[:, 0], u[:, 1], b.inward)
+            np.testing.assert_allclose(J, J_ref, rtol=1e-7, atol=1e-9)
+            np.testing.assert_allclose(own, own_ref, rtol=1e-7)
+            checked += 1
+    assert checked

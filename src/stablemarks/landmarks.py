@@ -549,37 +549,44 @@ def relative_error_model(camera: StereoCamera, fit: PlaneFit, boundary: Boundary
     allowance). Derivatives by central differences of the estimator itself (``step_px`` [px],
     ``step_line`` [m, 1]): the fusion's gain depends on the line, so no closed form is simpler. ``(None, None,
     None)`` when the boundary carries no column covariance.
+
+    All perturbed columns are triangulated and fused in one batch each; a step ``h`` of the line's offset is the
+    points moved by ``−h`` along the normal and back (``G`` depends on ``a`` only through ``offset − a``, and the
+    gain not at all), so only the slope's two steps need a line of their own.
     """
     cov_ub = boundary.cov_uv_measured if measured and boundary.cov_uv_measured is not None else boundary.cov_uv
     if cov_ub is None:
         return None, None, None
     X = fit.X
-    u_f = np.stack([np.asarray(u_left, dtype=float), np.asarray(u_right, dtype=float)], axis=-1)  # (n, 2)
-
-    def distances(line, ub, uf):
-        P_f, cov_f = camera.triangulate(uf[:, 0], uf[:, 1], X)
-        P_b, cov_b = camera.triangulate(ub[0], ub[1], X, cov_uv=cov_ub)
-        P_f, _ = line.fuse_point(P_f, cov_f)
-        P_b, _ = line.fuse_point(P_b, cov_b)
-        return (P_f - P_b) @ t
-
-    ub0 = np.asarray(boundary.u, dtype=float)
-    J = np.empty((len(u_f), 4))
-    for i, h in enumerate((step_line, step_line)):
-        key = "a" if i == 0 else "b"
-        hi = replace(fit, **{key: getattr(fit, key) + h})
-        lo = replace(fit, **{key: getattr(fit, key) - h})
-        J[:, i] = (distances(hi, ub0, u_f) - distances(lo, ub0, u_f)) / (2 * h)
-    for i in range(2):
-        e = np.zeros(2)
-        e[i] = step_px
-        J[:, 2 + i] = (distances(fit, ub0 + e, u_f) - distances(fit, ub0 - e, u_f)) / (2 * step_px)
-    own = np.zeros(len(u_f))
-    for i in range(2):
-        e = np.zeros(2)
-        e[i] = step_px
-        g = (distances(fit, ub0, u_f + e) - distances(fit, ub0, u_f - e)) / (2 * step_px)
-        own += (g * camera.sigma_img) ** 2
+    n_f = len(np.atleast_1d(u_left))
+    u_f = np.stack([np.asarray(u_left, dtype=float).ravel(), np.asarray(u_right, dtype=float).ravel()], axis=-1)
+    steps = np.array([[0.0, 0.0], [step_px, 0.0], [-step_px, 0.0], [0.0, step_px], [0.0, -step_px]])  # (5, 2)
+    uf = u_f[None, :, :] + steps[:, None, :]  # (5, n, 2): base, ±u_l, ±u_r
+    ub = np.asarray(boundary.u, dtype=float)[None, :] + steps  # (5, 2)
+    P_f, cov_f = camera.triangulate(uf[..., 0], uf[..., 1], X)  # (5, n, 2)
+    P_b, cov_b = camera.triangulate(ub[:, 0], ub[:, 1], X, cov_uv=cov_ub)  # (5, 2)
+    nrm = fit.plane.normal
+    # the base line on: every column variant, and the base columns moved ∓h along the normal (a ± h)
+    hf = np.stack([P_f[0] - step_line * nrm, P_f[0] + step_line * nrm])  # (2, n, 2)
+    hb = np.stack([P_b[0] - step_line * nrm, P_b[0] + step_line * nrm])  # (2, 2)
+    F, _ = fit.fuse_point(np.concatenate([P_f, hf]), np.concatenate([cov_f, np.broadcast_to(cov_f[0], hf.shape + (2,))]))
+    B, _ = fit.fuse_point(np.concatenate([P_b, hb]), np.concatenate([cov_b, np.broadcast_to(cov_b[0], hb.shape + (2,))]))
+    F[5] += step_line * nrm
+    F[6] -= step_line * nrm
+    B[5] += step_line * nrm
+    B[6] -= step_line * nrm
+    slope = []
+    for h in (step_line, -step_line):
+        line = replace(fit, b=fit.b + h)
+        slope.append((line.fuse_point(P_f[0], cov_f[0])[0] - line.fuse_point(P_b[0], cov_b[0])[0]) @ t)
+    base_b = B[0]
+    J = np.empty((n_f, 4))
+    J[:, 0] = ((F[5] - B[5]) @ t - (F[6] - B[6]) @ t) / (2 * step_line)
+    J[:, 1] = (slope[0] - slope[1]) / (2 * step_line)
+    J[:, 2] = ((F[0] - B[1]) @ t - (F[0] - B[2]) @ t) / (2 * step_px)
+    J[:, 3] = ((F[0] - B[3]) @ t - (F[0] - B[4]) @ t) / (2 * step_px)
+    own = (((F[1] - base_b) @ t - (F[2] - base_b) @ t) / (2 * step_px) * camera.sigma_img) ** 2
+    own += (((F[3] - base_b) @ t - (F[4] - base_b) @ t) / (2 * step_px) * camera.sigma_img) ** 2
     cov_shared = np.zeros((4, 4))
     cov_shared[:2, :2] = fit.cov_R
     cov_shared[2:, 2:] = cov_ub

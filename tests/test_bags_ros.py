@@ -212,13 +212,18 @@ def test_convert_then_run_the_folder_equals_run_on_the_bag(tmp_path, inputs, cap
     assert main(["convert", str(bag), *TOPICS, "--map", str(inputs["map"]), "--groundtruth-topic", GT,
                  "--out", str(folder)]) == 0
     printed = capsys.readouterr().out
-    assert "wrote" in printed and "--pose-sigma" in printed  # the start covariance is not kept: told
+    assert "wrote" in printed
+    # the start pose's covariance (/initialpose) is kept in sequence.yaml: the folder runs as the bag, no flag
+    import yaml as _yaml
+
+    np.testing.assert_allclose(_yaml.safe_load((folder / "sequence.yaml").read_text())["initial_cov"], _sigma_cov(),
+                               rtol=0, atol=0)
     assert sorted(p.name for p in folder.iterdir()) == ["calib", "frames.csv", "groundtruth.tum", "left", "map.yaml",
                                                         "odometry.csv", "right", "sequence.yaml"]
     assert sorted(p.name for p in (folder / "calib").iterdir()) == ["left.yaml", "mount.yaml", "right.yaml"]
     assert len(list((folder / "left").iterdir())) == N_FRAMES
     from_bag = run_cli(tmp_path, "bag", bag, *TOPICS, "--map", inputs["map"], "--groundtruth-topic", GT)
-    from_folder = run_cli(tmp_path, "folder", folder, "--pose-sigma", SIGMA)
+    from_folder = run_cli(tmp_path, "folder", folder)
     (t_bag, p_bag), (t_dir, p_dir) = _trajectory(from_bag), _trajectory(from_folder)
     np.testing.assert_array_equal(t_bag, t_dir)
     np.testing.assert_allclose(p_bag, p_dir, rtol=0, atol=1e-9)

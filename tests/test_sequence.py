@@ -240,6 +240,10 @@ BROKEN = {
     "no truth": (lambda d: (d / "groundtruth.json").unlink(), r"groundtruth\.json: no such truth file"),
     "bad initial pose": (lambda d: edit_yaml(d / "sequence.yaml", initial_pose={"x": 0, "theta": 1}),
                          r"sequence\.yaml: initial_pose: expected a mapping \{x: m, y: m, theta_deg: deg\}"),
+    "initial cov not 3x3": (lambda d: edit_yaml(d / "sequence.yaml", initial_cov=[[1, 0], [0, 1]]),
+                            r"sequence\.yaml: initial_cov: expected a 3×3 list of numbers"),
+    "initial cov indefinite": (lambda d: edit_yaml(d / "sequence.yaml", initial_cov=[[1, 2, 0], [2, 1, 0], [0, 0, 1]]),
+                               r"sequence\.yaml: initial_cov: expected a symmetric positive semi-definite matrix"),
 }
 
 

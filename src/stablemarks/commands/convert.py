@@ -72,15 +72,10 @@ def run(args: argparse.Namespace) -> int:
                 out, name=source.name, description=f"converted by stablemarks convert from {args.source}",
                 camera=source.camera, calibration=source.calibration, world_map=source.world_map,
                 stamps=source.stamps, odometry=source.odometry_poses, pans=source.pans, images=images(),
-                groundtruth=truth, initial_pose=SE2.from_array(source.initial_pose), force=args.force)
-        cov = getattr(source, "initial_cov", None)
+                groundtruth=truth, initial_pose=SE2.from_array(source.initial_pose), force=args.force,
+                initial_cov=getattr(source, "initial_cov", None))
     files = ["sequence.yaml", "calib/", "map.yaml", "left/", "right/", "frames.csv", "odometry.csv"]
     if truth is not None:
         files.append("groundtruth.tum")
     console.print(f"wrote {written}/ ({', '.join(files)}): {n} frames; run it with: stablemarks run {args.out}")
-    if cov is not None:
-        sigma = np.sqrt(np.diag(cov))
-        console.print("note: the start pose's covariance (/initialpose) is not kept in the folder; pass "
-                      f"--pose-sigma {float(sigma[0])!r},{float(sigma[1])!r},{float(sigma[2])!r} to run it"
-                      + (" (its off-diagonal terms are lost)" if np.any(cov - np.diag(np.diag(cov))) else ""))
     return 0

@@ -38,6 +38,8 @@ these are the names ``simulate`` uses)::
     groundtruth: groundtruth.tum    # optional
     truth: groundtruth.json         # optional
     initial_pose: {x: 0.0, y: 0.0, theta_deg: 90.0}   # optional: the robot's start in the map [m, deg]
+    initial_cov: [[0.0025, 0, 0], [0, 0.0025, 0], [0, 0, 0.0003]]   # optional: its covariance over
+                                    #   (x [m], y [m], theta [rad]), symmetric positive semi-definite
 
 ``frames.csv`` (comma-separated, header line first, columns in any order)::
 
@@ -122,7 +124,7 @@ STAMP_TOLERANCE = 1e-6
 SEQUENCE_FILE = "sequence.yaml"
 
 _KEYS = ("format", "version", "name", "description", "calibration", "mount", "map", "frames", "odometry",
-         "groundtruth", "truth", "initial_pose")
+         "groundtruth", "truth", "initial_pose", "initial_cov")
 _FRAME_COLUMNS = ("index", "stamp", "left", "right")
 _ODOMETRY_COLUMNS = ("stamp", "x", "y", "theta")
 
@@ -147,6 +149,7 @@ class Sequence:
     groundtruth : (n, 3) true poses at the frame stamps (NaN rows outside the ground truth's time span), or None.
     truth_path : the simulator's per-frame truth (``groundtruth.json``), or None.
     initial_pose : the robot's start in the map, or None.
+    initial_cov : (3, 3) its covariance over ``(x, y, theta)`` [m², rad²], or None.
     """
 
     root: Path
@@ -164,6 +167,7 @@ class Sequence:
     truth_path: Path | None = None
     initial_pose: SE2 | None = None
     description: str = ""
+    initial_cov: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for name in ("indices", "stamps", "pans", "odometry", "groundtruth"):
@@ -297,6 +301,19 @@ def _initial_pose(value, source: Path) -> SE2 | None:
     return SE2(numbers["x"], numbers["y"], float(wrap_angle(math.radians(numbers["theta_deg"]))))
 
 
+def _initial_cov(value, source: Path) -> np.ndarray | None:
+    if value is None:
+        return None
+    where = f"{source}: initial_cov"
+    if not (isinstance(value, list) and len(value) == 3 and all(isinstance(r, list) and len(r) == 3 for r in value)):
+        raise SequenceError(expected("a 3×3 list of numbers (x, y, theta) [m², rad²]", value, where=where))
+    with _as_sequence_error():
+        cov = np.array([[map_number(v, f"{where}[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(value)])
+    if not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-15) or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() < -1e-12:
+        raise SequenceError(f"{where}: expected a symmetric positive semi-definite matrix, got {value!r}"[:300])
+    return 0.5 * (cov + cov.T)
+
+
 def _interpolate_poses(stamps_gt: np.ndarray, poses_gt: np.ndarray, stamps: np.ndarray) -> np.ndarray:
     """Poses (n, 3) at ``stamps``: linear in x, y and in the unwrapped heading; NaN outside ``stamps_gt``."""
     theta = np.unwrap(poses_gt[:, 2])
@@ -425,7 +442,8 @@ def load_sequence(path: str | Path) -> Sequence:
 
     seq = Sequence(root, name, camera, calibration, world_map, np.array(indices), stamps, tuple(left),
                    tuple(right), np.array(pans), odometry, groundtruth, truth_path,
-                   _initial_pose(meta.get("initial_pose"), source), description)
+                   _initial_pose(meta.get("initial_pose"), source), description,
+                   _initial_cov(meta.get("initial_cov"), source))
     with _as_sequence_error():
         seq.frame(0)
     return seq
@@ -495,6 +513,7 @@ def write_sequence(
     initial_pose: SE2 | None = None,
     description: str = "",
     force: bool = False,
+    initial_cov=None,
 ) -> Path:
     """Write a sequence folder (format in the module docstring) and return its path.
 
@@ -516,6 +535,7 @@ def write_sequence(
     truth : called once after the last image, returns the JSON document written as ``groundtruth.json``.
     initial_pose : the robot's start in the map, or None.
     force : replace an existing sequence folder.
+    initial_cov : (3, 3) the start pose's covariance over ``(x, y, theta)`` [m², rad²], or None.
 
     Everything is written into a temporary folder beside ``out_dir``, checked with :func:`load_sequence`,
     and renamed to ``out_dir`` only then: on any error (or interruption) the temporary folder is removed
@@ -538,7 +558,7 @@ def write_sequence(
     tmp.mkdir()
     try:
         _write_contents(tmp, name, description, camera, world_map, stamps, odometry, pans, images, calibration,
-                        groundtruth, truth, initial_pose)
+                        groundtruth, truth, initial_pose, initial_cov)
         load_sequence(tmp)
         _install(tmp, out, force)
     except BaseException:
@@ -548,7 +568,7 @@ def write_sequence(
 
 
 def _write_contents(tmp: Path, name, description, camera, world_map, stamps, odometry, pans, images,
-                    calibration, groundtruth, truth, initial_pose) -> None:
+                    calibration, groundtruth, truth, initial_pose, initial_cov=None) -> None:
     n = len(stamps)
     calib = tmp / "calib"
     if calibration is None:
@@ -599,6 +619,8 @@ def _write_contents(tmp: Path, name, description, camera, world_map, stamps, odo
     if initial_pose is not None:
         meta["initial_pose"] = {"x": initial_pose.x, "y": initial_pose.y,
                                 "theta_deg": math.degrees(initial_pose.theta)}
+    if initial_cov is not None:
+        meta["initial_cov"] = [[float(v) for v in row] for row in np.asarray(initial_cov, dtype=float)]
     (tmp / SEQUENCE_FILE).write_text(yaml.safe_dump(meta, sort_keys=False))
 
 
@@ -618,6 +640,7 @@ class SequenceSource:
         if start_pose is None and sequence.initial_pose is not None:
             start_pose = sequence.initial_pose.as_array()
         self.initial_pose = None if start_pose is None else np.asarray(start_pose, dtype=float)
+        self.initial_cov = sequence.initial_cov
         self.notes: list[str] = []
 
     def __len__(self) -> int:

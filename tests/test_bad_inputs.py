@@ -60,7 +60,7 @@ def _map_text(**change) -> str:
 def _select(lab, tmp, *, map=None, pose="0,0,90deg", sigma="0.05,0.05,1deg", extra=()):
     lab_dir = lab / "lab"
     return ["select", str(lab_dir / "frame_000000_left.png"), str(lab_dir / "frame_000000_right.png"),
-            "--map", map or str(lab_dir / "map.yaml"), "--calib", str(lab_dir), "--pose", pose,
+            "--map", map or str(lab_dir / "map.yaml"), "--calib", str(lab_dir / "calib"), "--pose", pose,
             "--pose-sigma", sigma, "--out", str(tmp / "out"), *extra]
 
 
@@ -104,7 +104,7 @@ def _calib(lab, tmp, edit) -> str:
     folder = tmp / "in" / "calib"
     folder.mkdir(parents=True)
     for name in ("left.yaml", "right.yaml"):
-        doc = yaml.safe_load((lab / "lab" / name).read_text())
+        doc = yaml.safe_load((lab / "lab" / "calib" / name).read_text())
         if name == "left.yaml":
             edit(doc)
         (folder / name).write_text(yaml.safe_dump(doc))

@@ -23,7 +23,7 @@ def test_select_on_a_rendered_frame(rendered, tmp_path, capsys):
     pan = json.loads((rendered / "groundtruth.json").read_text())["frames"][0]["pan"]  # the head looked 5° left
     code = main(["select", str(rendered / "frame_000000_left.png"), str(rendered / "frame_000000_right.png"),
                  "--map", str(rendered / "map.yaml"), "--pose", "0,0,90deg", "--pose-sigma", "0.05,0.05,1deg",
-                 "--pan", str(pan), "--calib", str(rendered), "--out", str(out), "--mm"])
+                 "--pan", str(pan), "--calib", str(rendered / "calib"), "--out", str(out), "--mm"])
     assert code == 0
     with (out / "landmarks.csv").open() as fh:
         rows = list(csv.DictReader(fh))
@@ -47,7 +47,7 @@ def test_select_on_a_rendered_frame(rendered, tmp_path, capsys):
 )
 def test_select_bad_input_is_one_line(rendered, tmp_path, capsys, change, message):
     args = {"--map": str(rendered / "map.yaml"), "--pose": "0,0,1.57", "--pose-sigma": "0.05,0.05,0.02",
-            "--calib": str(rendered), "--out": str(tmp_path / "o")}
+            "--calib": str(rendered / "calib"), "--out": str(tmp_path / "o")}
     args.update(change)
     argv = ["select", str(rendered / "frame_000000_left.png"), str(rendered / "frame_000000_right.png")]
     for k, v in args.items():
@@ -65,7 +65,7 @@ def test_select_pair_of_different_sizes(rendered, tmp_path, capsys):
     img = cv2.imread(str(rendered / "frame_000000_right.png"))
     cv2.imwrite(str(small), img[:240, :320])
     code = main(["select", str(rendered / "frame_000000_left.png"), str(small), "--map", str(rendered / "map.yaml"),
-                 "--pose", "0,0,1.57", "--pose-sigma", "0.05,0.05,0.02", "--calib", str(rendered),
+                 "--pose", "0,0,1.57", "--pose-sigma", "0.05,0.05,0.02", "--calib", str(rendered / "calib"),
                  "--out", str(tmp_path / "o")])
     assert code == 1
     assert "sizes differ" in capsys.readouterr().err

@@ -19,8 +19,10 @@ def test_render_lab_frames(tmp_path, capsys):
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted([
         "frame_000000_left.png", "frame_000000_right.png", "frame_000020_left.png", "frame_000020_right.png",
-        "map.yaml", "left.yaml", "right.yaml", "groundtruth.json", "map.png",
+        "map.yaml", "calib", "groundtruth.json", "map.png",
     ])
+    assert sorted(p.name for p in (out / "calib").iterdir()) == ["left.yaml", "mount.yaml", "right.yaml"]
+    assert yaml.safe_load((out / "calib" / "mount.yaml").read_text())["mount"]["height"] == pytest.approx(1.0)
     truth = json.loads((out / "groundtruth.json").read_text())
     assert truth["scenario"] == "lab" and truth["seed"] == 3 and truth["n_frames"] == 21
     assert [f["index"] for f in truth["frames"]] == [0, 20]
@@ -34,7 +36,7 @@ def test_render_lab_frames(tmp_path, capsys):
     np.testing.assert_array_equal(left, simulate_run(load_scenario("lab"), 3).render(20).left)
     # The map and the calibration read back.
     assert load_map(out / "map.yaml") == load_scenario("lab").map
-    calib = load_camera_info_pair(out)
+    calib = load_camera_info_pair(out / "calib")
     cam = calib.stereo_camera()
     assert cam.f == pytest.approx(500.0) and cam.baseline == pytest.approx(0.12)
     assert "2 of 21 frames rendered" in capsys.readouterr().out

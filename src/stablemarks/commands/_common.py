@@ -145,8 +145,9 @@ def load_camera(calib: str | None, mount_path: str | None, near: str | Path):
 
     if calib is None:
         here = Path(near).parent
-        if (here / "left.yaml").exists() and (here / "right.yaml").exists():
-            calib = str(here)
+        found = [d for d in (here, here / "calib") if (d / "left.yaml").exists() and (d / "right.yaml").exists()]
+        if found:
+            calib = str(found[0])
         else:
             raise InputError(
                 f"no calibration: pass --calib DIR (a left.yaml/right.yaml camera_info pair or an OpenCV "
@@ -159,6 +160,20 @@ def load_camera(calib: str | None, mount_path: str | None, near: str | Path):
     else:
         mount = load_mount(mount_path)
     return calibration.stereo_camera(mount), calibration
+
+
+def mount_source(calib: str | None, mount_path: str | None, near: str | Path) -> str:
+    """Where :func:`load_camera` takes the mount from, as a phrase for the console."""
+    if mount_path is not None:
+        return f"{mount_path} (--camera)"
+    if calib is None:
+        here = Path(near).parent
+        calib = str(next((d for d in (here, here / "calib") if (d / "left.yaml").exists()), here))
+    beside = Path(calib) / "mount.yaml" if Path(calib).is_dir() else Path(calib).parent / "mount.yaml"
+    if beside.exists():
+        return f"{beside} (beside the calibration)"
+    return ("the default, x 0 m, y 0 m, height 1 m, pan 0 (no mount.yaml beside the calibration; "
+            "pass --camera MOUNT.yaml)")
 
 
 def out_dir_arg(parser: argparse.ArgumentParser, default: str | None = None) -> None:

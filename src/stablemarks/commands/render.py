@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 
 import cv2
+import yaml
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -21,7 +23,8 @@ HELP = "render a simulated scenario: stereo PNGs, map, calibration and per-frame
 DESCRIPTION = (
     "Simulate the robot's run through SCENARIO (a built-in name such as 'lab', or a scenario YAML file) and "
     "write into DIR: frame_NNNNNN_left.png / _right.png for each rendered frame, map.yaml (the robot's map), "
-    "left.yaml / right.yaml (ROS camera_info of the rectified pair), groundtruth.json (per frame: true pose, "
+    "calib/left.yaml / calib/right.yaml (ROS camera_info of the rectified pair) and calib/mount.yaml (where the head "
+    "sits on the robot), groundtruth.json (per frame: true pose, "
     "pan, noisy odometry, dead reckoning, and every vertical image edge with its true position and "
     "visibility) and map.png (a picture of the scenario and the run). The seed fixes odometry and image noise."
 )
@@ -83,7 +86,11 @@ def run(args: argparse.Namespace) -> int:
     from ..viz.scene import save_scene_figure
 
     scenario.map.save(out / "map.yaml")
-    save_camera_info_pair(out, scenario.camera)
+    save_camera_info_pair(out / "calib", scenario.camera)
+    cam = scenario.camera
+    (out / "calib" / "mount.yaml").write_text(yaml.safe_dump({"mount": {
+        "x": cam.mount_x, "y": cam.mount_y, "height": cam.mount_height, "pan_deg": math.degrees(cam.pan)}},
+        sort_keys=False))
     (out / "groundtruth.json").write_text(json.dumps({**sim.header(), "frames": records}, indent=1, allow_nan=False))
     save_scene_figure(out / "map.png", scenario, sim)
 
@@ -97,6 +104,6 @@ def run(args: argparse.Namespace) -> int:
     drift = sim.dead_reckoning[frames[-1]].translation - last.translation
     console.print(f"Frame {frames[-1]}: true pose ({last.x:.3f}, {last.y:.3f}) m, dead-reckoning error "
                   f"{float((drift @ drift) ** 0.5):.3f} m")
-    console.print(f"Wrote {out}/: frame_*_left.png, frame_*_right.png, map.yaml, left.yaml, right.yaml, "
-                  "groundtruth.json, map.png")
+    console.print(f"Wrote {out}/: frame_*_left.png, frame_*_right.png, map.yaml, calib/left.yaml, "
+                  "calib/right.yaml, calib/mount.yaml, groundtruth.json, map.png")
     return 0

@@ -12,6 +12,7 @@ from ._common import (
     load_camera,
     load_world_map,
     make_console,
+    mount_source,
     out_dir_arg,
     parse_pan,
     pose_prior,
@@ -54,6 +55,7 @@ def run(args) -> int:
     pan = parse_pan(args.pan)
     world_map = load_world_map(args.map)
     camera, calibration = load_camera(args.calib, args.camera, args.left)
+    console.print(f"mount: {mount_source(args.calib, args.camera, args.left)}")
     if pan is not None:
         camera = camera.with_pan(pan)
     left, right = load_stereo_pair(args.left, args.right, calibration)

@@ -136,3 +136,28 @@ def test_ray_distances_hit_the_nearest_wall():
     # the nearest wall left out: the next one along the ray
     np.testing.assert_allclose(ray_distances(origins[:1], dirs[:1], walls, exclude=[0]), [5.0])
     assert ray_distances(np.zeros((1, 2)), dirs[:1], np.zeros((0, 2, 2)))[0] == np.inf
+
+
+def test_a_map_says_how_accurate_its_walls_are(tmp_path):
+    """``accuracy`` round-trips through the file (default exact) and is validated; walls extracted from an
+    occupancy grid carry what the extraction achieves."""
+    import math
+
+    from stablemarks.errors import ConfigError
+    from stablemarks.io.mapfiles import walls_from_occupancy
+    from stablemarks.maps import load_map, parse_map
+
+    doc = {"planes": [{"id": "a", "p1": [0, 0], "p2": [1, 0]}]}
+    assert parse_map(doc).accuracy == (0.0, 0.0)
+    m = parse_map({**doc, "accuracy": {"offset": 0.02, "angle_deg": 0.5}})
+    assert m.accuracy == pytest.approx((0.02, math.radians(0.5)))
+    m.save(tmp_path / "m.yaml")
+    assert load_map(tmp_path / "m.yaml").accuracy == pytest.approx(m.accuracy)
+    with pytest.raises(ConfigError, match=r"accuracy: expected a mapping \{offset: m, angle_deg: deg\}"):
+        parse_map({**doc, "accuracy": {"offset": 0.02, "angle": 1}})
+    with pytest.raises(ConfigError, match="accuracy"):
+        parse_map({**doc, "accuracy": {"offset": -1}})
+    grid = np.zeros((40, 40), dtype=np.int8)
+    grid[20:22, 5:35] = 100
+    walls = walls_from_occupancy(grid.astype(int), 0.05, (0.0, 0.0, 0.0))
+    assert walls.accuracy[0] >= 0.02 and walls.accuracy[1] == pytest.approx(math.radians(0.5))

@@ -57,7 +57,7 @@ class LandmarkConfig:
             raise InputError(expected("'measured' or 'model'", self.filter_boundary_sigma,
                                       where="landmarks.filter_boundary_sigma"))
         for name in ("off_wall_sigma", "row_sigma_px", "max_range", "max_incidence_deg", "boundary_gate_sigma",
-                     "fit_gate_chi2", "map_offset_sigma", "map_angle_sigma_deg"):
+                     "fit_gate_chi2"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0):
                 raise InputError(expected("a positive number", v, where=f"landmarks.{name}"))
@@ -122,15 +122,10 @@ class LandmarkConfig:
     pose's, projected on the wall) disagrees with the map: nothing is modelled from it in that frame."""
     fit_gate_chi2: float = 13.8
     """A fitted wall line ``(a, b)`` (offset and slope from the map's wall, seen through the belief) must agree
-    with the map given the pose covariance, the fit's own and the map's (``map_offset_sigma``,
-    ``map_angle_sigma_deg``): Mahalanobis² at most this (χ²₂, 0.999). A
+    with the map given the pose covariance, the fit's own and the map's (:attr:`Map.accuracy`, e.g. of walls
+    extracted from an occupancy grid): Mahalanobis² at most this (χ²₂, 0.999). A
     line that does not is another surface caught in a wide band (a wall behind a free-standing screen when
     the heading is uncertain), bent and shifted far beyond its σ: nothing is modelled from it in that frame."""
-    map_offset_sigma: float = 0.02
-    """How far [m] a mapped wall may lie from the real one along its normal (σ), for the fitted-wall gate: a
-    map drawn by hand or extracted from an occupancy grid (``map-walls``: 2 cm, 0.5°) is not exact."""
-    map_angle_sigma_deg: float = 0.5
-    """How far [deg] a mapped wall's direction may be from the real one (σ), for the fitted-wall gate."""
     min_edge_step_sigma: float = 3.0
     """A free edge is searched only where the map puts something at a different depth just beyond it: the
     disparity step the map predicts across the edge must reach this many σ of the disparity noise
@@ -698,7 +693,8 @@ def landmarks_on_plane(
     ``border_sigma_px``: see :func:`search_boundary`.
     """
     if cov_X is not None:
-        cov_map = np.diag([config.map_offset_sigma, np.tan(np.radians(config.map_angle_sigma_deg))]) ** 2
+        offset, angle = world_map.accuracy if world_map is not None else (0.0, 0.0)
+        cov_map = np.diag([offset, np.tan(angle)]) ** 2
         m2 = fit_disagreement(camera, fit, cov_X, cov_map=cov_map)
         if m2 > config.fit_gate_chi2:
             # A wall turned from the map (a wrong pan turns every wall like this): its free edges in view were

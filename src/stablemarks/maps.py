@@ -138,11 +138,15 @@ class Map:
     ``planes`` are the walls (:class:`ReferencePlane`: a vertical plane standing on the floor segment
     ``p1 → p2`` [m], with its free edges, heights ``z`` [m], visible side and whether it is a reference plane
     or only an occluder). ``map[id]`` gives a wall by id; iterating gives the walls in order.
+    ``accuracy`` ``(offset [m], angle [rad])``: how far (σ) a mapped wall may lie from the real one along its
+    normal and turn from it — ``(0, 0)`` for an exact map (a scenario's), ``(0.02, 0.5°)`` for walls extracted
+    from an occupancy grid; the map file's ``accuracy: {offset: m, angle_deg: deg}``.
     """
 
     planes: tuple[ReferencePlane, ...]
     frame: str = "map"
     source: str = field(default="", compare=False)
+    accuracy: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         ids = [p.id for p in self.planes]
@@ -173,7 +177,10 @@ class Map:
         return np.array([[p.P1, p.P2] for p in self.planes])
 
     def to_dict(self) -> dict:
-        return {"frame": self.frame, "planes": [p.to_dict() for p in self.planes]}
+        d = {"frame": self.frame}
+        if any(self.accuracy):
+            d["accuracy"] = {"offset": float(self.accuracy[0]), "angle_deg": math.degrees(self.accuracy[1])}
+        return {**d, "planes": [p.to_dict() for p in self.planes]}
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
@@ -265,7 +272,19 @@ def parse_map(data: object, source: str = "map") -> Map:
     if not isinstance(frame, str):
         raise ConfigError(expected("a frame name", frame, where=f"{source}: frame"))
     parsed = tuple(parse_plane(p, f"{source}: planes[{i}]") for i, p in enumerate(planes))
-    return Map(parsed, frame, source)
+    return Map(parsed, frame, source, _accuracy(data.get("accuracy"), f"{source}: accuracy"))
+
+
+def _accuracy(value, where: str) -> tuple[float, float]:
+    if value is None:
+        return (0.0, 0.0)
+    if not isinstance(value, dict) or set(value) - {"offset", "angle_deg"}:
+        raise ConfigError(expected("a mapping {offset: m, angle_deg: deg}", value, where=where))
+    offset = _number(value.get("offset", 0.0), f"{where}.offset", 10.0)
+    angle = _number(value.get("angle_deg", 0.0), f"{where}.angle_deg", 45.0)
+    if offset < 0 or angle < 0:
+        raise ConfigError(expected("σ >= 0", value, where=where))
+    return (offset, math.radians(angle))
 
 
 # ------------------------------------------------------------------- YAML

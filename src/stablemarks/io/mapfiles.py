@@ -68,6 +68,7 @@ first (``p1``) and last (``p2``) point of each line. Other geometry types are re
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -907,7 +908,8 @@ def walls_from_occupancy(grid, resolution: float, origin, params: WallExtraction
                        reference=reference)
         for i, (_, P, edges, side, reference, _) in enumerate(walls)
     )
-    return Map(planes, "map", source)
+    # what the extraction achieves (tests/test_map_walls_accuracy.py): faces to a fraction of a cell, 0.5°
+    return Map(planes, "map", source, (max(0.02, 0.4 * float(resolution)), math.radians(0.5)))
 
 
 # ------------------------------------------------------------ GeoJSON

@@ -663,6 +663,9 @@ class PlaneLandmarks:
     searched: list[str] = field(default_factory=list)
     """The free edges searched in this frame (in the searchable part of both images, not hidden, with a depth
     step behind them)."""
+    gated: str = ""
+    """Why the fitted wall was not used (:func:`fit_disagreement`): ``"turned"`` from the map (its free edges in
+    view are then counted as searched and not found), ``"shifted"``, or ``""`` (used)."""
 
 
 def landmarks_on_plane(
@@ -702,13 +705,14 @@ def landmarks_on_plane(
             in_view = [e for e in fit.plane.free_edges if np.all(np.isfinite(fit.prediction.edges[e].u))
                        and fit.prediction.edges[e].window(0, config.search_sigma)[1] >= 0
                        and fit.prediction.edges[e].window(0, config.search_sigma)[0] <= camera.width - 1]
-            if fit_disagreement(camera, fit, cov_X, slope_only=True, cov_map=cov_map) <= SLOPE_GATE_CHI2:
+            turned = fit_disagreement(camera, fit, cov_X, slope_only=True, cov_map=cov_map) > SLOPE_GATE_CHI2
+            if not turned:
                 in_view = []
             return PlaneLandmarks(fit, [], np.zeros(len(pairs), dtype=bool), [], [
                 (None, f"plane {fit.plane.label!r}: the fitted wall is {100 * fit.a:+.1f} cm off and turned "
                        f"{np.degrees(np.arctan(fit.b)):+.1f}° from the map's (Mahalanobis² {m2:.0f} > "
                        f"{config.fit_gate_chi2:g} with the pose's uncertainty): another surface in its band, not used")],
-                in_view)
+                in_view, "turned" if turned else "shifted")
     members = plane_members(fit, pairs, left_segments, plane_config)
     # A wall in line with another (two partitions in a row) shares its plane: segments beyond the wall's ends
     # fit it too. Only those between the two ends' search windows are the wall's.

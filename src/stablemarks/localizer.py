@@ -169,7 +169,12 @@ def _edges_missing(model: FrameLandmarks | None, config: Config | None = None, w
         return limits is None or all(lim[0] < e.window(img, sigma)[0] and e.window(img, sigma)[1] < lim[1]
                                      for img, lim in enumerate(limits))
 
-    expected = sum(len(m.searched) for m in model.planes)
+    # Walls turned from the map are a wrong pan only when two or more are and none fits where the map puts it (a
+    # wrong pan turns them all); one turned wall, alone or beside a good one, may be another surface caught in
+    # its band (a wall behind a screen while the heading is uncertain).
+    turned = sum(m.gated == "turned" for m in model.planes)
+    pan_like = turned >= 2 and all(m.gated for m in model.planes)
+    expected = sum(len(m.searched) for m in model.planes if m.gated != "turned" or pan_like)
     expected += sum(sum(1 for e in pred.edges.values() if searchable(e))
                     for pred, fit in zip(model.predictions, model.fits, strict=True) if not fit)
     found = sum(len(m.boundaries) for m in model.planes)

@@ -564,8 +564,10 @@ def relative_error_model(camera: StereoCamera, fit: PlaneFit, boundary: Boundary
     # the base line on: every column variant, and the base columns moved ∓h along the normal (a ± h)
     hf = np.stack([P_f[0] - step_line * nrm, P_f[0] + step_line * nrm])  # (2, n, 2)
     hb = np.stack([P_b[0] - step_line * nrm, P_b[0] + step_line * nrm])  # (2, 2)
-    F, _ = fit.fuse_point(np.concatenate([P_f, hf]), np.concatenate([cov_f, np.broadcast_to(cov_f[0], hf.shape + (2,))]))
-    B, _ = fit.fuse_point(np.concatenate([P_b, hb]), np.concatenate([cov_b, np.broadcast_to(cov_b[0], hb.shape + (2,))]))
+    cov_hf = np.broadcast_to(cov_f[0], hf.shape + (2,))
+    cov_hb = np.broadcast_to(cov_b[0], hb.shape + (2,))
+    F, _ = fit.fuse_point(np.concatenate([P_f, hf]), np.concatenate([cov_f, cov_hf]))
+    B, _ = fit.fuse_point(np.concatenate([P_b, hb]), np.concatenate([cov_b, cov_hb]))
     F[5] += step_line * nrm
     F[6] -= step_line * nrm
     B[5] += step_line * nrm
@@ -653,13 +655,14 @@ def _inward(plane, edge: str) -> np.ndarray:
 @dataclass(frozen=True)
 class PlaneLandmarks:
     """Everything modelled on one plane in one frame; ``rejected_boundaries`` are boundaries found but not
-    used, each with the reason (a sentence for the log)."""
+    used, each with the reason (a sentence for the log; ``None`` for the boundary when the fitted wall itself
+    was not used, :attr:`gated`)."""
 
     fit: PlaneFit
     boundaries: list[Boundary]
     members: np.ndarray
     candidates: list[Candidate]
-    rejected_boundaries: list[tuple[Boundary, str]] = field(default_factory=list)
+    rejected_boundaries: list[tuple[Boundary | None, str]] = field(default_factory=list)
     searched: list[str] = field(default_factory=list)
     """The free edges searched in this frame (in the searchable part of both images, not hidden, with a depth
     step behind them)."""
@@ -711,7 +714,8 @@ def landmarks_on_plane(
             return PlaneLandmarks(fit, [], np.zeros(len(pairs), dtype=bool), [], [
                 (None, f"plane {fit.plane.label!r}: the fitted wall is {100 * fit.a:+.1f} cm off and turned "
                        f"{np.degrees(np.arctan(fit.b)):+.1f}° from the map's (Mahalanobis² {m2:.0f} > "
-                       f"{config.fit_gate_chi2:g} with the pose's uncertainty): another surface in its band, not used")],
+                       f"{config.fit_gate_chi2:g} with the pose's uncertainty): another surface in its band, "
+                       "not used")],
                 in_view, "turned" if turned else "shifted")
     members = plane_members(fit, pairs, left_segments, plane_config)
     # A wall in line with another (two partitions in a row) shares its plane: segments beyond the wall's ends

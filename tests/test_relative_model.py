@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from stablemarks.landmarks import fit_disagreement, relative_error_model
+from stablemarks.landmarks import fit_disagreements, relative_error_model
 from stablemarks.pipeline import process_frame
 
 from .conftest import COV_PRIOR
@@ -96,17 +96,17 @@ def test_a_fitted_wall_where_the_map_puts_it_passes_and_a_turned_one_does_not(la
     cam, fl, plane = lab_view
     fit = plane.fit
     on_map = replace(fit, a=0.0, b=0.0, cov_R=np.diag([1e-4, 1e-4]))
-    assert fit_disagreement(cam, on_map, COV_PRIOR) == pytest.approx(0.0)
+    assert fit_disagreements(cam, on_map, COV_PRIOR)[0] == pytest.approx(0.0)
     turned = replace(on_map, b=0.25)  # another surface, 14° off, with a tight fit
     tight = np.diag([1e-4, 1e-4, 0.005**2])
-    assert fit_disagreement(cam, turned, tight) > 100
+    assert fit_disagreements(cam, turned, tight)[0] > 100
     # the wall a heading error of 0.25 rad shows is plausible when the heading is that uncertain
     from stablemarks.landmarks import seen_wall_jacobian
 
     a, b = seen_wall_jacobian(cam, on_map)[:, 2] * 0.25
     loose = np.diag([1e-4, 1e-4, 0.25**2])
-    assert fit_disagreement(cam, replace(on_map, a=a, b=b), loose) < 13.8
-    assert fit_disagreement(cam, replace(on_map, a=a, b=b), tight) > 100
+    assert fit_disagreements(cam, replace(on_map, a=a, b=b), loose)[0] < 13.8
+    assert fit_disagreements(cam, replace(on_map, a=a, b=b), tight)[0] > 100
 
 
 def test_the_pose_moves_the_seen_wall_as_the_geometry_says(lab_view):

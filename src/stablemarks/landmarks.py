@@ -667,7 +667,7 @@ class PlaneLandmarks:
     """The free edges searched in this frame (in the searchable part of both images, not hidden, with a depth
     step behind them)."""
     gated: str = ""
-    """Why the fitted wall was not used (:func:`fit_disagreement`): ``"turned"`` from the map (its free edges in
+    """Why the fitted wall was not used (:func:`fit_disagreements`): ``"turned"`` from the map (its free edges in
     view are then counted as searched and not found), ``"shifted"``, or ``""`` (used)."""
 
 
@@ -701,14 +701,14 @@ def landmarks_on_plane(
     if cov_X is not None:
         offset, angle = world_map.accuracy if world_map is not None else (0.0, 0.0)
         cov_map = np.diag([offset, np.tan(angle)]) ** 2
-        m2 = fit_disagreement(camera, fit, cov_X, cov_map=cov_map)
+        m2, m2_slope = fit_disagreements(camera, fit, cov_X, cov_map)
         if m2 > config.fit_gate_chi2:
             # A wall turned from the map (a wrong pan turns every wall like this): its free edges in view were
             # expected and are not found. A wall merely shifted (a slip, a kidnap) is left to the widened search.
             in_view = [e for e in fit.plane.free_edges if np.all(np.isfinite(fit.prediction.edges[e].u))
                        and fit.prediction.edges[e].window(0, config.search_sigma)[1] >= 0
                        and fit.prediction.edges[e].window(0, config.search_sigma)[0] <= camera.width - 1]
-            turned = fit_disagreement(camera, fit, cov_X, slope_only=True, cov_map=cov_map) > SLOPE_GATE_CHI2
+            turned = m2_slope > SLOPE_GATE_CHI2
             if not turned:
                 in_view = []
             return PlaneLandmarks(fit, [], np.zeros(len(pairs), dtype=bool), [], [
@@ -773,7 +773,7 @@ def landmarks_on_plane(
 
 
 SLOPE_GATE_CHI2 = 10.83
-"""χ²₁(0.999): a fitted wall's slope alone beyond this is turned from the map (see :func:`fit_disagreement`)."""
+"""χ²₁(0.999): a fitted wall's slope alone beyond this is turned from the map (see :func:`fit_disagreements`)."""
 
 
 def seen_wall_jacobian(camera: StereoCamera, fit: PlaneFit) -> np.ndarray:
@@ -803,23 +803,21 @@ def seen_wall_jacobian(camera: StereoCamera, fit: PlaneFit) -> np.ndarray:
     return J
 
 
-def fit_disagreement(camera: StereoCamera, fit: PlaneFit, cov_X, *, slope_only: bool = False,
-                     cov_map=None) -> float:
+def fit_disagreements(camera: StereoCamera, fit: PlaneFit, cov_X, cov_map=None) -> tuple[float, float]:
     """Mahalanobis² of the fitted line ``(a, b)`` against the map's wall (``(0, 0)``) with covariance
-    ``J Σ_X Jᵀ + Σ_R`` (:func:`seen_wall_jacobian`); ``slope_only``: of ``b`` alone (1 dof) — a wall turned
-    from the map (a wrong pan turns them all), as opposed to one shifted (a slip or a kidnap moves them).
-    ``cov_map`` (2, 2): the map wall's own uncertainty in ``(a, b)`` (default none)."""
+    ``J Σ_X Jᵀ + Σ_R`` (:func:`seen_wall_jacobian`), and of ``b`` alone (1 dof): a wall turned from the map (a
+    wrong pan turns them all), as opposed to one shifted (a slip or a kidnap moves them). ``cov_map`` (2, 2):
+    the map wall's own uncertainty in ``(a, b)`` (default none)."""
     J = seen_wall_jacobian(camera, fit)
     S = J @ np.asarray(cov_X, dtype=float) @ J.T + fit.cov_R
     if cov_map is not None:
         S = S + np.asarray(cov_map, dtype=float)
-    if slope_only:
-        return float(fit.b**2 / S[1, 1]) if S[1, 1] > 0 else 0.0
+    slope = float(fit.b**2 / S[1, 1]) if S[1, 1] > 0 else 0.0
     r = np.array([fit.a, fit.b])
     try:
-        return float(r @ np.linalg.solve(S, r))
+        return float(r @ np.linalg.solve(S, r)), slope
     except np.linalg.LinAlgError:
-        return 0.0
+        return 0.0, slope
 
 
 def boundary_disagreement(b: Boundary, plane, X, cov_X) -> tuple[float, float]:

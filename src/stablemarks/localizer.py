@@ -150,7 +150,7 @@ class Estimate:
     entered: Entered = field(default_factory=Entered)
 
 
-def _edges_missing(model: FrameLandmarks | None, config: Config | None = None, width: int | None = None) -> bool:
+def _edges_missing(model: FrameLandmarks | None, config: Config, width: int) -> bool:
     """Whether most free edges expected in this frame were not found where the map puts them: of the edges
     searched (found, rejected or not found) and those on planes predicted in view but not found at all, fewer
     than half were found and accepted. One edge missed now and then (hidden, too far, a ragged border) is not
@@ -159,15 +159,14 @@ def _edges_missing(model: FrameLandmarks | None, config: Config | None = None, w
     the image's left border, inside the disparity range, cannot be found whatever the pan."""
     if model is None:
         return False
-    config = config or Config()
-    limits = disparity_limits(config.sad, width) if width else None
+    limits = disparity_limits(config.sad, width)
     sigma = config.landmarks.search_sigma
 
     def searchable(e) -> bool:
         if not (e.free and np.all(np.isfinite(e.u))):
             return False
-        return limits is None or all(lim[0] < e.window(img, sigma)[0] and e.window(img, sigma)[1] < lim[1]
-                                     for img, lim in enumerate(limits))
+        return all(lim[0] < e.window(img, sigma)[0] and e.window(img, sigma)[1] < lim[1]
+                   for img, lim in enumerate(limits))
 
     # Walls turned from the map are a wrong pan only when two or more are and none fits where the map puts it (a
     # wrong pan turns them all); one turned wall, alone or beside a good one, may be another surface caught in

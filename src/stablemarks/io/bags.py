@@ -64,9 +64,9 @@ from .calibration import (
     _check_intrinsics,
     _check_projection,
     _check_rotation,
-    _check_stereo_projections,
     load_calibration,
     load_mount,
+    stereo_from_camera_infos,
 )
 from .images import MAX_IMAGE_SIDE, check_image_size, imdecode_quietly
 from .recorded import (
@@ -596,14 +596,10 @@ def calibration_from_camera_info(infos: Sequence[dict], where: str, rectified: b
         (lw, lh), (rw, rh) = left["size"], right["size"]
         raise SequenceError(f"{where}: image sizes differ: {left_info['topic']} width/height is {lw}×{lh}, "
                             f"{right_info['topic']} is {rw}×{rh}")
-    _check_stereo_projections(left["P"], right["P"], f"{where}: {left_info['topic']}: P",
-                              f"{where}: {right_info['topic']}: P")
-    R = right["R"].T @ left["R"]
-    T = right["R"].T @ np.array([right["P"][0, 3] / right["P"][0, 0], 0.0, 0.0])
-    return StereoCalibration(left["size"], left["K"], left["D"], right["K"], right["D"], R, T, left["R"], right["R"],
-                             left["P"], right["P"], left_info.get("frame") or "left",
-                             right_info.get("frame") or "right",
-                             f"{where} camera_info {left_info['topic']}, {right_info['topic']}")
+    return stereo_from_camera_infos(
+        left, right, (f"{where}: {left_info['topic']}: P", f"{where}: {right_info['topic']}: P"),
+        (left_info.get("frame") or "left", right_info.get("frame") or "right"),
+        f"{where} camera_info {left_info['topic']}, {right_info['topic']}")
 
 
 # ------------------------------------------------------------------ the mount from tf

@@ -422,12 +422,20 @@ def load_camera_info_pair(directory: str | Path) -> StereoCalibration:
     if left["size"] != right["size"]:
         raise ConfigError(f"{directory}: image sizes differ: {paths[0].name} is {left['size'][0]}×{left['size'][1]}, "
                           f"{paths[1].name} is {right['size'][0]}×{right['size'][1]}")
-    _check_stereo_projections(left["P"], right["P"], f"{paths[0]}: projection_matrix",
-                              f"{paths[1]}: projection_matrix")
+    return stereo_from_camera_infos(left, right, (f"{paths[0]}: projection_matrix", f"{paths[1]}: projection_matrix"),
+                                    (left["name"], right["name"]), str(directory))
+
+
+def stereo_from_camera_infos(left: dict, right: dict, where: tuple[str, str], names: tuple[str, str],
+                             source: str) -> StereoCalibration:
+    """The stereo calibration of a checked camera_info pair (``size``, ``K``, ``D``, ``R``, ``P`` each, from a
+    file or a bag's messages): the projections checked against each other (errors name ``where``),
+    ``R = R2ᵀ R1``, ``T = R2ᵀ (Tx/f, 0, 0)`` with the right ``Tx = P[0,3] = −f·baseline``."""
+    _check_stereo_projections(left["P"], right["P"], *where)
     R = right["R"].T @ left["R"]
     T = right["R"].T @ np.array([right["P"][0, 3] / right["P"][0, 0], 0.0, 0.0])
     return StereoCalibration(left["size"], left["K"], left["D"], right["K"], right["D"], R, T, left["R"], right["R"],
-                             left["P"], right["P"], left["name"], right["name"], str(directory))
+                             left["P"], right["P"], names[0], names[1], source)
 
 
 # ------------------------------------------------------- OpenCV FileStorage

@@ -21,6 +21,8 @@ frame (only their differences are used); pans [rad] relative to the robot's head
 
 from __future__ import annotations
 
+import math
+
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -218,6 +220,8 @@ class Localizer:
         # The widened search asks whether the walls moved as a whole (a slip, a kidnap): a wall fitted far from
         # the map is then the evidence, not a second surface in the band, so it is not gated there.
         self._probe_config = self.config.with_overrides({"landmarks": {"fit_gate_chi2": 1e9}})
+        # a line is neither entered nor associated when its wall is seen more obliquely than this
+        self._max_incidence = math.radians(self.config.landmarks.max_incidence_deg)
         self.world_map = world_map
         self.camera = self.config.camera(camera)
         self.method = method if isinstance(method, Method) else method_named(method)
@@ -304,7 +308,7 @@ class Localizer:
         modelled = {m.fit.plane.id for m in model.planes if m.boundaries}
         seen = {i for i, _ in assoc}
         out = []
-        for i in self.ekf.visible(pan):
+        for i in self.ekf.visible(pan, self._max_incidence):
             if i in dropped:
                 continue
             if i in seen:
@@ -389,7 +393,7 @@ class Localizer:
             edges_missing = _edges_missing(model, self.config, self.camera.width)
             pan_suspect = self.health.suspect_edges(edges_missing)
             report: dict = {}
-            assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report)
+            assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report, self._max_incidence)
             if model is not None and (edges_missing or not assoc) and self.ekf.visible(pan):
                 # the walls are not where the prediction puts them: look again with wider gates (a slip or a
                 # kidnap moves them beyond the bands of a confident pose). Also while the pan is suspect: walls
@@ -397,7 +401,7 @@ class Localizer:
                 wide = method.model(front, cam_k, self.world_map, self.ekf.pose,
                                     self.ekf.cov_pose * self.config.health.search_inflation, self._probe_config)
                 wide_report: dict = {}
-                method.associate(self.ekf, front, wide, pan, cam_k, wide_report)
+                method.associate(self.ekf, front, wide, pan, cam_k, wide_report, self._max_incidence)
                 if wide_report.get("incompatible") and not wide_report.get("compatible"):
                     model, report = wide, wide_report
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
@@ -411,7 +415,7 @@ class Localizer:
                     pan_suspect = edges_missing = False
             if disagree and self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
                 record.inflation, _ = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
-                assoc = method.associate(self.ekf, front, model, pan, cam_k)
+                assoc = method.associate(self.ekf, front, model, pan, cam_k, max_incidence=self._max_incidence)
             assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma)
             dropped += self._missed_landmarks(model, assoc, pan, dropped)
             for i in dropped:

@@ -55,16 +55,17 @@ class Method:
         return select_landmarks(front, camera, world_map, X, cov_X, config)
 
     def associate(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, pan: float,
-                  camera: StereoCamera, report: dict | None = None) -> list[tuple[int, int]]:
+                  camera: StereoCamera, report: dict | None = None, max_incidence: float | None = None
+                  ) -> list[tuple[int, int]]:
         """``(landmark id, kept-pair index)`` of this frame (:func:`~stablemarks.estimation.associate_frame`,
-        which fills ``report``)."""
+        which fills ``report``); wall landmarks seen more obliquely than ``max_incidence`` [rad] are left out."""
         pairs = front.kept_pairs
         if not ekf.n_landmarks or not len(pairs):
             return []
         measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
         polarity = front.left_segments.polarity[pairs.left_index]
         centre = camera.optical_centres(ekf.pose)[0]
-        return associate_frame(ekf, pairs, measured, pan, model, polarity, centre, report)
+        return associate_frame(ekf, pairs, measured, pan, model, polarity, centre, report, max_incidence)
 
     def take(self, model: FrameLandmarks) -> list[Candidate]:
         """The candidates this method enters as landmarks."""

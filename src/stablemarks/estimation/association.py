@@ -26,8 +26,8 @@ __all__ = ["associate_frame", "height_cost", "is_duplicate", "match_along_wall",
 
 
 def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, model=None,
-                    polarity: np.ndarray | None = None, centre=None, report: dict | None = None
-                    ) -> list[tuple[int, int]]:
+                    polarity: np.ndarray | None = None, centre=None, report: dict | None = None,
+                    max_incidence: float | None = None) -> list[tuple[int, int]]:
     """Pairs (landmark id, segment-pair index) for this frame's update.
 
     Wall landmarks are found by the *pattern* of this frame's candidates along each wall (their positions
@@ -39,6 +39,9 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     the camera centre ``centre`` (2,); a wall landmark never matches an edge whose step along its wall is the
     opposite (a bar's two edges, equally long and a bar's width apart, differ only in it).
 
+    ``max_incidence`` [rad]: wall landmarks seen at a more grazing angle than this are not associated
+    (:meth:`JointEKF.visible`; the limit of entry, ``landmarks.max_incidence_deg``, by default).
+
     ``report`` (a dict, filled when given): ``"compatible"`` the wall patterns kept, ``"incompatible"`` those
     matched along their wall but jointly incompatible with the predicted pose (evidence that the odometry and
     the images disagree).
@@ -46,7 +49,7 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     if polarity is None or centre is None:
         polarity, centre = np.zeros(len(measured), dtype=int), np.zeros(2)
     polarity = np.asarray(polarity, dtype=int)
-    in_view = set(ekf.visible(pan))
+    in_view = set(ekf.visible(pan, max_incidence))
     walls: list[list[tuple[int, int]]] = []
     if model is not None:
         for plane_model in model.planes:
@@ -82,7 +85,7 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     # landmark there that the pattern leaves out does not sit where its line is (a line standing a few cm in
     # front of the wall shifts along it with the viewing angle), so the image gates do not get to take it.
     patterned = {ekf.landmark_plane(m[0][0]).id for m in kept if len(m) >= 2}
-    rest = [i for i in ekf.landmark_ids if i not in taken_l and not (
+    rest = [i for i in ekf.landmark_ids if i in in_view and i not in taken_l and not (
         ekf.landmark(i).kind == "wall" and ekf.landmark_plane(i).id in patterned)]
     free = [j for j in range(len(measured)) if j not in taken_p]
     if rest and free:

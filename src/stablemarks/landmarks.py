@@ -404,8 +404,10 @@ def search_boundary(
         lo_r, hi_r = e.window(1, config.search_sigma)
         regions[1] = right_region(pred, disparity_right, plane_config.row_margin_px,
                                   (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
+    outwards = [-1 if e.u[img] < u_inner[img] else 1 for img in (0, 1)]
+    right_found = True
     for img in (0, 1):
-        outward = -1 if e.u[img] < u_inner[img] else 1
+        outward = outwards[img]
         lo, hi = e.window(img, config.search_sigma)
         if img == 0:  # the left region exists only inside the plane's predicted window
             lo, hi = max(lo, pred.window[0]), min(hi, pred.window[1])
@@ -419,24 +421,36 @@ def search_boundary(
         if len(rows) < config.min_boundary_rows:
             if img == 0:
                 return None
-            # right image unusable: take the column where the fitted plane puts the left boundary
-            d_here, _ = pred.disparity_at(u_b[0])
-            u_b[1] = u_b[0] - float(d_here)
-            var_b[1] = config.fallback_sigma_px**2
+            right_found = False
             continue
         m, var = minimum_variance_column(cols, lo, hi)
         if img == 0:
             rows_used = len(rows)
-        # A boundary placed inside the outermost segment of the region is moved to that segment. Block
-        # matching erodes or fattens a region's border by up to the window, so only segments within one
-        # window beyond it count (farther ones lie on a wall in line with this one, past a gap).
-        if len(members_u):
-            beyond = (members_u[:, img] - m) * outward
-            near = members_u[(beyond > 0) & (beyond <= w), img]
-            if len(near):
-                m, snapped = float(near.min() if outward < 0 else near.max()), True
         u_b[img] = m
         var_b[img] = var + camera.sigma_img**2
+    # A boundary placed inside the outermost segment of the region is moved to that segment. Block matching
+    # erodes or fattens a region's border by up to the window, so only segments within one window beyond it
+    # count (farther ones lie on a wall in line with this one, past a gap). The move takes one segment *pair*
+    # in both images: moving each image's border to its own outermost line can take two different lines, whose
+    # disparity puts the edge metres off the wall (hall, screens at 10 m: 3–6 px off the plane's disparity,
+    # 0.1 m along it). The pair's right line must lie within one window of the right border too.
+    if len(members_u):
+        beyond = (members_u - u_b) * np.asarray(outwards)
+        near = (beyond[:, 0] > 0) & (beyond[:, 0] <= w)
+        if right_found:
+            near &= np.abs(beyond[:, 1]) <= w
+        if np.any(near):
+            k = np.flatnonzero(near)[np.argmax(beyond[near, 0])]
+            u_b[:] = members_u[k]
+            snapped = True
+            if not right_found:
+                var_b[1] = var_b[0]
+                right_found = True
+    if not right_found:
+        # right image unusable: take the column where the fitted plane puts the left boundary
+        d_here, _ = pred.disparity_at(u_b[0])
+        u_b[1] = u_b[0] - float(d_here)
+        var_b[1] = config.fallback_sigma_px**2
     # The window term is one physical effect seen by both disparity images (the window straddling the
     # depth edge shifts the region's border the same way in 3D): it is shared, fully correlated.
     border = border_sigma_px if isinstance(border_sigma_px, tuple) else (border_sigma_px, border_sigma_px)

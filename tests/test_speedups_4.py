@@ -115,3 +115,60 @@ def test_boundary_columns_equal_the_array_reference_on_plane_regions(models):
                                           (name, k, img, outward, hole))
                             n += len(got[0])
     assert n > 1000
+
+
+# ------------------------------------------------------------------ joint compatibility, projections once
+def associate_joint_reference(ekf, measured, pan=0.0, candidates=None, extra_cost=None):
+    """The former :meth:`JointEKF.associate_joint`: each trial set's joint NIS by :meth:`JointEKF.joint_nis`,
+    which projects the trial's landmarks again."""
+    from scipy.special import chdtri
+
+    ids, z, d2, cost = ekf._association_costs(measured, pan, candidates, extra_cost)
+    order = [(r, c) for r, c in zip(*np.nonzero((d2 <= ekf.config.gate) & np.isfinite(cost)), strict=True)]
+    order.sort(key=lambda rc: cost[rc])
+    chosen, used_r, used_c = [], set(), set()
+    for r, c in order:
+        if r in used_r or c in used_c:
+            continue
+        trial = chosen + [(int(ids[r]), int(c))]
+        if ekf.joint_nis(trial, z, pan) <= chdtri(2 * len(trial), 1.0 - ekf.config.gate_probability):
+            chosen = trial
+            used_r.add(r)
+            used_c.add(c)
+    return sorted(chosen, key=lambda q: q[1])
+
+
+def test_associate_joint_equals_the_reference(frames, models):
+    """The filter after each frame (a wall landmark per selected candidate), its pose moved a little and its
+    measurements shifted and shuffled so that pairs compete: the same pairs as the former association, and the
+    trial sets' joint NIS from the projections made once equal :meth:`JointEKF.joint_nis` bit for bit."""
+    from stablemarks.estimation import JointEKF, NewLandmark
+
+    config = Config()
+    rng = np.random.default_rng(7)
+    compared = 0
+    for (name, k, _l, _r, camera, world_map, X), (_, _, front, model) in zip(frames, models, strict=True):
+        if not model.selected:
+            continue
+        pairs = front.kept_pairs
+        measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+        for trial in range(4):
+            dX = rng.normal(0, [0.02, 0.02, 0.005]) if trial else np.zeros(3)
+            ekf = JointEKF(camera, X + dX, COV_PRIOR, config.ekf)
+            ekf.add_landmarks([NewLandmark.wall(world_map[c.plane_id], c.s, c.edge) for c in model.selected],
+                              np.diag([c.sigma_s**2 for c in model.selected]))
+            z = measured + (rng.normal(0, 1.5, measured.shape) if trial > 1 else 0.0)
+            if trial == 3:
+                z = np.concatenate([z, z[::2] + 3.0])
+            got = ekf.associate_joint(z, 0.0)
+            assert got == associate_joint_reference(ekf, z, 0.0), (name, k, trial)
+            compared += len(got)
+            if got:
+                rows = ekf._rows([i for i, _ in got], "test")
+                ids_all = ekf.landmark_ids
+                all_rows = ekf._rows(ids_all, "test")
+                uv, J_X, J_l = ekf._project(all_rows, ekf._x, ekf._camera(0.0))
+                pos = [ids_all.index(i) for i, _ in got]
+                zz = z[[j for _, j in got]]
+                assert ekf._joint_nis(rows, zz, uv[pos], J_X[pos], J_l[pos]) == ekf.joint_nis(got, z, 0.0)
+    assert compared > 20

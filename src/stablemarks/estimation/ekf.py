@@ -729,8 +729,13 @@ class JointEKF:
             return 0.0
         z = np.asarray(measured, dtype=float).reshape(-1, 2)[[j for _, j in pairs]]
         rows = self._rows([i for i, _ in pairs], "joint_nis")
+        return self._joint_nis(rows, z, *self._project(rows, self._x, self._camera(pan)))
+
+    def _joint_nis(self, rows: np.ndarray, z: np.ndarray, uv: np.ndarray, J_I_X: np.ndarray, J_I_l: np.ndarray
+                   ) -> float:
+        """:meth:`joint_nis` of landmarks ``rows`` (m,) measured at ``z`` (m, 2), their projections (``uv``,
+        ``J_I_X``, ``J_I_l`` of :meth:`_project`, row by row) given."""
         m = len(rows)
-        uv, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
         idx = np.concatenate([np.arange(3), self._idx2[rows].ravel()])
         ar = np.arange(m)
         H_l = np.zeros((m, 2, m, 2))
@@ -762,12 +767,20 @@ class JointEKF:
         chosen: list[tuple[int, int]] = []
         used_r, used_c = set(), set()
         p = self.config.gate_probability
+        if order:
+            # every trial's joint NIS (:meth:`joint_nis`) from the landmarks in view projected once
+            rows = self._rows(ids, "associate_joint")
+            uv, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
+        taken_r: list[int] = []
         for r, c in order:
             if r in used_r or c in used_c:
                 continue
             trial = chosen + [(int(ids[r]), int(c))]
-            if self.joint_nis(trial, z, pan) <= chdtri(2 * len(trial), 1.0 - p):
+            tr = taken_r + [int(r)]
+            nis = self._joint_nis(rows[tr], z[[j for _, j in trial]], uv[tr], J_I_X[tr], J_I_l[tr])
+            if nis <= chdtri(2 * len(trial), 1.0 - p):
                 chosen = trial
+                taken_r = tr
                 used_r.add(r)
                 used_c.add(c)
         return sorted(chosen, key=lambda q: q[1])

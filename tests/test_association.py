@@ -227,3 +227,20 @@ def test_a_saved_polarity_must_be_minus_one_zero_or_one(bad):
     saved[0]["polarity"] = bad
     with pytest.raises(ConfigError, match=r"landmarks\[0\]\.polarity"):
         JointEKF(CAMERA, X0, COV_POSE).load_prior_landmarks(saved, Map((WALL,)))
+
+
+# ------------------------------------------------------------ grazing incidence
+SIDE = ReferencePlane("side", (1.0, 1.0), (1.0, 8.0), free_edges=("p1",))  # along the view: seen at a slant
+
+
+def test_a_wall_landmark_seen_at_a_grazing_angle_is_not_visible_for_association():
+    ekf = _ekf(s=(0.9,), polarity=(0,))
+    (front,) = ekf.landmark_ids
+    ekf = _ekf(plane=SIDE, s=(3.0,), polarity=(0,), ekf=ekf)  # at (1, 4): 76° from the side wall's normal
+    side = [i for i in ekf.landmark_ids if i != front][0]
+    assert set(ekf.visible()) == {front, side}
+    assert set(ekf.visible(0.0, np.radians(80.0))) == {front, side}
+    assert ekf.visible(0.0, np.radians(60.0)) == [front]
+    measured = _predicted(ekf, [front, side])  # both measured exactly where predicted
+    assert sorted(associate_frame(ekf, _Pairs(2), measured, 0.0)) == sorted([(front, 0), (side, 1)])
+    assert associate_frame(ekf, _Pairs(2), measured, 0.0, max_incidence=np.radians(60.0)) == [(front, 0)]

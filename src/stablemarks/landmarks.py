@@ -116,7 +116,9 @@ class LandmarkConfig:
     """Candidates whose viewing ray meets the wall more than this far from its normal [deg] are not entered
     ("too oblique"): a wall seen at a grazing angle stretches the SAD window over a wide stretch of wall and
     half-hides lines behind nearer walls. Measured as above: 5–9 mm RMS along the wall below 60°, 63 mm at
-    60–70°, 149 mm at 70–80° (up to 0.54 m, several σ: the errors behind the loop's drifting landmarks)."""
+    60–70°, 149 mm at 70–80° (up to 0.54 m, several σ: the errors behind the loop's drifting landmarks). The
+    same limit keeps a landmark already in the filter from being associated while its wall is seen more
+    obliquely (:meth:`~stablemarks.estimation.JointEKF.visible`)."""
     boundary_gate_sigma: float = 3.0
     """A found boundary farther along the wall from the map's free edge than this many σ (its own σ and the
     pose's, projected on the wall) disagrees with the map: nothing is modelled from it in that frame."""

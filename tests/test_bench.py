@@ -106,3 +106,17 @@ def test_stage_times_time_the_pipeline_as_the_localizer_runs_it():
         assert out[key] > 0, key
     assert out["pipeline_fps"] == pytest.approx(1000.0 / out["pipeline_ms"])
     assert out["run_frames"] == [0]
+
+
+def test_lap_source_renders_nothing_for_dead_reckoning(monkeypatch):
+    from stablemarks.online import run_online
+    from stablemarks.sim import render
+
+    def refuse(self, X, pan, rng):
+        raise AssertionError("a frame was rendered")
+
+    monkeypatch.setattr(render.Renderer, "render", refuse)
+    source = LapSource("loop", 4)
+    result = run_online(source, method="dead_reckoning")
+    assert result.n_frames == 4 and not source.rendering
+    np.testing.assert_allclose(result.poses, result.dead_reckoning, atol=1e-12)

@@ -178,9 +178,40 @@ def test_methods_of_one_run_share_its_rendered_frames(monkeypatch):
     calls.clear()
     alone = [run_trials([t])[0] for t in trials]
     assert n_shared == distinct < len(calls)  # every (pose, pan) rendered once
-    assert len(calls) >= 3 * len(methods)
+    assert len(calls) >= 3 * (len(methods) - 1)  # dead_reckoning renders nothing
     for a, b in zip(shared, alone, strict=True):
         assert "error" not in a
         for key in ("stage_times", "time_per_frame"):  # wall times
             a.pop(key), b.pop(key)
         assert json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
+
+
+def test_dead_reckoning_trials_render_nothing_and_measure_as_with_the_images(monkeypatch):
+    """A dead_reckoning trial renders no frame, and its line of trials.jsonl is the one it had when every frame
+    was rendered (the frames' random streams are their own; its truth bookkeeping is geometry)."""
+    from stablemarks import evaluation
+    from stablemarks.sim import render
+
+    trial = make_trials(["lab"], 1, ["dead_reckoning"], frames=10)[0]
+
+    class Rendered(evaluation.SimulatedSource):
+        rendering = property(lambda self: True, lambda self, value: None)  # renders whatever the method
+
+    with monkeypatch.context() as m:
+        m.setattr(evaluation, "SimulatedSource", Rendered)
+        calls = []
+        original = render.Renderer.render
+        m.setattr(render.Renderer, "render", lambda self, *a: calls.append(1) or original(self, *a))
+        rendered = evaluation.run_trials([trial])[0]
+        assert len(calls) == 10
+
+    def refuse(self, X, pan, rng):
+        raise AssertionError("a frame was rendered")
+
+    monkeypatch.setattr(render.Renderer, "render", refuse)
+    without = evaluation.run_trials([trial])[0]
+    assert "error" not in without and "error" not in rendered
+    assert without["frames"] == 10 and any(without["position_error"])
+    for key in ("stage_times", "time_per_frame"):  # wall times
+        without.pop(key), rendered.pop(key)
+    assert json.dumps(without, sort_keys=True) == json.dumps(rendered, sort_keys=True)

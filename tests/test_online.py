@@ -227,3 +227,81 @@ def test_an_interrupted_run_keeps_its_streamed_log(lab_scenario, tmp_path):
         run_online(Broken(run, frames=4), observers=[log], keep="poses")
     lines = (tmp_path / "log.jsonl").read_text().splitlines()
     assert [json.loads(line)["index"] for line in lines] == [0, 1]
+
+
+class Unrendered:
+    """A renderer that fails when asked for images; the geometric truth is the scenario renderer's."""
+
+    def __init__(self, scenario):
+        from stablemarks.sim.render import renderer_for
+
+        self.renderer = renderer_for(scenario)
+
+    def render(self, X, pan, rng):
+        raise AssertionError("a frame was rendered")
+
+    def truth(self, X, pan):
+        return self.renderer.truth(X, pan)
+
+
+class AlwaysRendered(SimulatedSource):
+    """A simulated source that renders every frame whatever the method (as before methods without vision
+    skipped it); ``renders`` counts its renderings."""
+
+    rendering = property(lambda self: True, lambda self, value: None)
+
+    def __init__(self, run, n):
+        super().__init__(run, frames=n)
+        self.renders = 0
+
+    def _shot(self, k, X, pan):
+        self.renders += 1
+        return super()._shot(k, X, pan)
+
+
+def test_dead_reckoning_renders_nothing_and_runs_as_with_the_images(lab_scenario):
+    """A method that reads no images gets frames without them (nothing rendered) and the same run, figure for
+    figure, as from the rendered frames: the frames' random streams are their own, the truth is geometry."""
+    from stablemarks.sim.render import renderer_for
+
+    run = simulate_run(lab_scenario, seed=6)
+    results, truths = [], []
+    blind = SimulatedSource(run, renderer=Unrendered(lab_scenario), frames=10)
+    seen = AlwaysRendered(run, 10)
+    for source in (blind, seen):
+        truth = TruthObserver()
+        results.append(truth.result(run_online(source, method="dead_reckoning", observers=[truth])))
+        truths.append(truth)
+    assert seen.renders == 10 and not blind.rendering
+    without, rendered = results
+    assert without.n_frames == rendered.n_frames == 10
+    for name in ("poses", "covs", "dead_reckoning", "true_poses"):
+        np.testing.assert_allclose(getattr(without, name), getattr(rendered, name), rtol=0, atol=1e-12)
+    for a, b in zip(without.records, rendered.records, strict=True):
+        assert (a.pan, a.pan_command, a.n_pairs, a.new, a.observed) == (b.pan, b.pan_command, b.n_pairs, b.new,
+                                                                        b.observed)
+    assert without.visible_truth == rendered.visible_truth and any(without.visible_truth)
+    assert (without.truth_of, without.rejected_truth) == (rendered.truth_of, rendered.rejected_truth) == ({}, {})
+    # the true edges agree but for what only the images decide: a boundary's polarity
+    assert truths[0].edges.keys() == truths[1].edges.keys()
+    for eid, e in truths[0].edges.items():
+        assert _geometric(e) == _geometric(truths[1].edges[eid])
+    full = renderer_for(lab_scenario).render(run.poses[3].as_array(), run.pans[3], run.frame_rng(3)).truth
+    geometric = renderer_for(lab_scenario).truth(run.poses[3].as_array(), run.pans[3])
+    assert [_geometric(e) for e in geometric.edges] == [_geometric(e) for e in full.edges]
+    assert any(e.visible_l and e.visible_r for e in full.edges)
+    assert (geometric.pose, geometric.pan) == (full.pose, full.pan)
+
+
+def _geometric(edge):
+    """A true edge without what the images decide (a boundary's polarity)."""
+    return replace(edge, polarity=0) if edge.boundary else edge
+
+
+def test_a_method_with_vision_still_gets_rendered_frames(lab_scenario):
+    source = SimulatedSource(simulate_run(lab_scenario, seed=6), frames=1)
+    source.rendering = False  # left over from a run without vision: the next run sets it
+    frames = []
+    run_online(source, observers=[lambda frame, est, loc: frames.append(frame)])
+    assert source.rendering and frames[0].left.shape == frames[0].right.shape == (lab_scenario.camera.height,
+                                                                                  lab_scenario.camera.width)

@@ -335,9 +335,8 @@ class LapSource(SimulatedSource):
                 pan = float(self._pan_for(odometry))
             else:
                 pan = previous = self._policy_pan(believed, previous)
-            sim = self.renderer.render(pose.as_array(), pan, self.run.frame_rng(k))
-            yield Frame(k, k * self.stamp_step, sim.left, sim.right, odometry, pan, true_pose=pose.as_array(),
-                        truth=sim.truth)
+            left, right, truth = self._shot(k, pose.as_array(), pan)
+            yield Frame(k, k * self.stamp_step, left, right, odometry, pan, true_pose=pose.as_array(), truth=truth)
 
 
 

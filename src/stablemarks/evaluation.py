@@ -370,6 +370,10 @@ class _SharedRenderer:
             self.renders += 1
         return frame
 
+    def truth(self, X, pan: float):
+        """The frame's truth without its images (:meth:`~stablemarks.sim.render.Renderer.truth`)."""
+        return self.renderer.truth(X, pan)
+
 
 class TrialFailure(RuntimeError):
     """A task of the evaluation could not be measured (its message says why)."""

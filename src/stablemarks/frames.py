@@ -29,7 +29,8 @@ class Frame:
     ----------
     index : position in the source, from 0.
     stamp : time [s].
-    left, right : (H, W) ``uint8`` rectified grayscale images, left camera the reference.
+    left, right : (H, W) ``uint8`` rectified grayscale images, left camera the reference; None from a simulator
+        running a method that reads no images (:class:`stablemarks.sim.SimulatedSource`, ``rendering``).
     odometry : (3,) the wheel-odometry pose ``(x [m], y [m], theta [rad])`` in the odometry frame at
         ``stamp`` (only differences between frames are used).
     pan : the head's pan [rad] when the frame was taken.

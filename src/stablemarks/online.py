@@ -146,7 +146,8 @@ def run_online(
     (``start_pose`` default: the source's ``initial_pose``, else the origin; ``config``: the source's
     defaults — :attr:`~stablemarks.frames.FrameSource.config_defaults` — fill what it leaves at the default).
     A steerable source (:class:`~stablemarks.frames.SteerableSource`) takes each frame's pan from
-    :meth:`Localizer.command_pan`. ``progress(k, n)`` is called after each frame.
+    :meth:`Localizer.command_pan`. A simulated source renders no images for a method that reads none
+    (``uses_vision`` False: its ``rendering`` is set off). ``progress(k, n)`` is called after each frame.
 
     ``keep``: ``"records"`` (default) keeps every frame's :class:`FrameRecord`; ``"poses"`` only its
     :class:`PoseRecord` (the observers still see the whole record: stream the log with
@@ -162,6 +163,8 @@ def run_online(
                               config=config, method=method, prior_landmarks=prior_landmarks)
     if isinstance(source, SteerableSource):
         source.steer(localizer.command_pan)
+    if hasattr(source, "rendering"):  # a simulator renders only for a method that reads the images
+        source.rendering = localizer.method.uses_vision
     records: list[FrameRecord] | list[PoseRecord] = []
     first_view = None
     n = len(source)

@@ -91,6 +91,12 @@ class Renderer:
                             gain=drawn.gain, motion_blur=drawn.motion_blur)
         return SimFrame(img_l, img_r, truth)
 
+    def truth(self, X, pan: float) -> FrameTruth:
+        """The truth of the frame from ``X`` with ``pan`` without rendering it: what geometry gives (edge
+        positions, columns, rows, visibility) — :meth:`render`'s truth but for what the images decide, the
+        polarity of boundary edges (0) and the optics draws (exposure and gain 1, no motion blur)."""
+        return frame_truth(self.world, self.scenario.camera.with_pan(pan), SE2.from_array(np.asarray(X, dtype=float)))
+
     def render_clean(self, X, pan: float) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free ``(left, right)`` float32 images (H, W) [gray levels, not clipped] at unit exposure."""
         camera = self.scenario.camera.with_pan(pan)

@@ -4,6 +4,11 @@ The robot's head follows the localizer's pan commands (the source is steerable):
 ``k`` it asks ``pan_for(odometry_k)`` — the pan the method wants at the odometry pose of that frame. Without
 a command the run's own pans are used (the scenario's policy applied to dead reckoning, as
 ``stablemarks simulate`` records them).
+
+With ``rendering = False`` (:func:`~stablemarks.online.run_online` sets it for a method that reads no images,
+``dead_reckoning``) nothing is rendered: the frames have no images (``left``, ``right`` None) and their truth
+is the geometric part only (:meth:`~stablemarks.sim.render.Renderer.truth`). Each frame's images draw from
+their own random stream (:meth:`~stablemarks.sim.run.Run.frame_rng`), so skipping them changes no other draw.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ class SimulatedSource:
         self.renderer = renderer or renderer_for(run.scenario)
         self.stamp_step = stamp_step
         self.notes: list[str] = []
+        self.rendering = True
         self._n = len(run) if frames is None else min(int(frames), len(run))
         self._pan_for: Callable[[np.ndarray], float] | None = None
         plan = self.scenario.robot.pan
@@ -56,9 +62,17 @@ class SimulatedSource:
         """Frame ``k`` rendered with ``pan`` (default: the run's pan of that frame)."""
         odometry = self.run.dead_reckoning[k].as_array()
         pan = float(self.run.pans[k] if pan is None else pan)
-        sim = self.renderer.render(self.run.poses[k].as_array(), pan, self.run.frame_rng(k))
-        return Frame(k, k * self.stamp_step, sim.left, sim.right, odometry, pan,
-                     true_pose=self.run.poses[k].as_array(), truth=sim.truth)
+        X = self.run.poses[k].as_array()
+        left, right, truth = self._shot(k, X, pan)
+        return Frame(k, k * self.stamp_step, left, right, odometry, pan, true_pose=X, truth=truth)
+
+    def _shot(self, k: int, X, pan: float) -> tuple:
+        """``(left, right, truth)`` of frame ``k`` taken from true pose ``X`` with ``pan``; without ``rendering``
+        ``(None, None, geometric truth)``, nothing rendered and no random draw."""
+        if not self.rendering:
+            return None, None, self.renderer.truth(X, pan)
+        sim = self.renderer.render(X, pan, self.run.frame_rng(k))
+        return sim.left, sim.right, sim.truth
 
     def __iter__(self) -> Iterator[Frame]:
         for k in range(len(self)):

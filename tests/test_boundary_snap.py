@@ -40,7 +40,7 @@ def test_a_snapped_boundary_has_the_disparity_of_its_wall(hall_boundaries):
 
 
 def test_snapped_boundaries_lie_at_the_true_edge_within_their_sigma(hall_boundaries):
-    for fit, b, T, _ in hall_boundaries:
+    for fit, b, _, _ in hall_boundaries:
         if b.snapped:
             off = float((b.P - fit.plane.edge(b.edge)) @ b.inward)
             assert abs(off) < 3.0 * b.sigma_along, (fit.plane.id, b.edge, off, b.sigma_along)

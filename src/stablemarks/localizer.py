@@ -22,7 +22,6 @@ frame (only their differences are used); pans [rad] relative to the robot's head
 from __future__ import annotations
 
 import math
-
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -393,7 +392,8 @@ class Localizer:
             edges_missing = _edges_missing(model, self.config, self.camera.width)
             pan_suspect = self.health.suspect_edges(edges_missing)
             report: dict = {}
-            assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report, self._max_incidence)
+            assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report,
+                                                            self._max_incidence)
             if model is not None and (edges_missing or not assoc) and self.ekf.visible(pan):
                 # the walls are not where the prediction puts them: look again with wider gates (a slip or a
                 # kidnap moves them beyond the bands of a confident pose). Also while the pan is suspect: walls

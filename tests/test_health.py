@@ -78,6 +78,72 @@ def test_a_wrong_pan_is_reported_within_twenty_frames(lab_seq, tmp_path, capsys)
     assert ate <= 1.05 * ate_dr
 
 
+@pytest.fixture(scope="module")
+def room_seq(tmp_path_factory):
+    from stablemarks.sim.scenario import load_scenario
+
+    return write_simulated_sequence(simulate_run(load_scenario("room"), seed=11), tmp_path_factory.mktemp("h") / "room")
+
+
+def _drop_pan(src, dst):
+    shutil.copytree(src, dst)
+    with open(dst / "frames.csv") as f:
+        rows = list(csv.DictReader(f))
+    fields = [k for k in rows[0] if k != "pan"]
+    with open(dst / "frames.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    return dst
+
+
+@pytest.mark.parametrize("fault", ["pan+0.2", "no pan column"])
+def test_walls_turned_together_are_not_used(room_seq, tmp_path, capsys, fault):
+    """The room's two walls are each turned too little to fail their own gate, together far beyond the
+    heading's uncertainty: a wrong pan turns every wall the same way. Nothing is entered or updated from them, the
+    pan is named within the first frames and the pose is no worse than the odometry's (it once entered landmarks
+    at frame 2 and drifted to 2.5× the odometry's ATE; and later, once the heading's uncertainty had grown enough
+    to take in the pan's error, edges_not_found cleared and the same happened)."""
+    if fault == "pan+0.2":
+        seq = _edit(room_seq, tmp_path / "pan", "pan", lambda k, v: v + 0.2)
+    else:
+        seq = _drop_pan(room_seq, tmp_path / "nopan")
+    assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    first = [line for line in err.splitlines() if line.startswith("warning: frame") and "pan" in line]
+    assert first and int(first[0].split()[2]) < 5, err
+    log = _log(tmp_path / "out")
+    assert any("together" in w for r in log for w in r["warnings"])
+    truth = np.array([r["true_pose"] for r in log])[:, :2]
+    ate = np.sqrt(np.mean(np.sum((np.array([r["pose"] for r in log])[:, :2] - truth) ** 2, axis=1)))
+    ate_dr = np.sqrt(np.mean(np.sum((np.array([r["dead_reckoning"] for r in log])[:, :2] - truth) ** 2, axis=1)))
+    assert ate <= 1.05 * ate_dr
+
+
+def test_a_common_turn_needs_walls_that_agree():
+    """common_turn: walls turned the same way share one turn; walls turned opposite ways spread about it."""
+    from types import SimpleNamespace
+
+    from stablemarks import landmarks
+
+    def fit(b, sigma):
+        return SimpleNamespace(b=b, cov_R=np.diag([1e-4, sigma**2]))
+
+    real = landmarks.seen_wall_jacobian
+    landmarks.seen_wall_jacobian = lambda camera, f: np.array([[0.0, 0.0, 0.5], [0.0, 0.0, 1.0]])
+    try:
+        cov_X = np.diag([0.01, 0.01, np.radians(0.5) ** 2])
+        walls = [fit(0.065, 0.02), fit(0.055, 0.02)]
+        # each alone inside its slope gate (χ²₁ 99.9 % = 10.83), together beyond it
+        assert all(f.b**2 / (cov_X[2, 2] + f.cov_R[1, 1]) < 10.83 for f in walls)
+        d, m2, spread, _ = landmarks.common_turn(None, walls, cov_X)
+        assert d == pytest.approx(0.06) and m2 > 10.83 and spread < 1.0
+        d, m2, spread, _ = landmarks.common_turn(None, [fit(0.10, 0.01), fit(-0.10, 0.01)], cov_X)
+        assert abs(d) < 1e-9 and m2 < 1e-9 and spread > 100
+    finally:
+        landmarks.seen_wall_jacobian = real
+
+
 @pytest.mark.slow
 def test_a_clean_corridor_prints_no_warning(tmp_path, capsys):
     """A poster at the image's left border, inside the disparity range, is not found whatever the pan: its

@@ -6,9 +6,15 @@ condition's name first):
 
 ``edges_not_found``
     a free edge searched in each of ``edges_frames`` frames in a row (predicted in the searchable image) was
-    not found, or found where the map does not put it: the head's pan (or the pose) is probably wrong. While it
-    holds nothing is associated, updated or entered: the walls are not where the pan says, so the pose follows
-    the odometry. It clears after ``edges_frames`` frames in a row find every searched edge where the map puts it.
+    not found, or found where the map does not put it, or the walls in view were turned together from the map
+    (their slopes share one turn far beyond the heading's uncertainty and agree on it,
+    :func:`stablemarks.landmarks.common_turn`: a wrong pan turns every wall the same way, a slip or a kidnap
+    shifts them): the head's pan (or the pose) is probably wrong. While it holds nothing is associated, updated
+    or entered: the walls are not where the pan says, so the pose follows the odometry; a frame whose walls are
+    turned together is not used even before it holds. It clears after ``edges_frames`` frames in a row find every
+    searched edge where the map puts it with the walls not turned together, and, when a turn of the walls raised
+    it, turned back from that turn beyond the heading's drift since (the heading's uncertainty grows while the
+    pose follows the odometry and would otherwise soon take in the pan's error).
 ``inconsistent``
     the joint NIS of the frame's update above its 99 % χ² bound for ``nis_frames`` frames in a row.
 ``odometry_disagrees``
@@ -81,15 +87,19 @@ class HealthMonitor:
         self._clean = 0
 
     def update(self, *, edges_missing: bool, nis_high: bool, disagree: bool, observed: bool, has_landmarks: bool,
-               inflation: float = 1.0) -> list[str]:
-        """Advance the counters by one frame; returns the sentences of the conditions that hold now."""
+               inflation: float = 1.0, edges_found: bool | None = None) -> list[str]:
+        """Advance the counters by one frame; returns the sentences of the conditions that hold now.
+
+        ``edges_found``: whether the frame found its walls where the map puts them, which is what clears
+        ``edges_not_found`` (default: not ``edges_missing``; a frame can be neither, e.g. one wall turned)."""
         c = self.config
+        found = not edges_missing if edges_found is None else edges_found and not edges_missing
         now = {"edges_not_found": edges_missing, "inconsistent": nis_high, "odometry_disagrees": disagree,
                "blind": has_landmarks and not observed}
         for k, v in now.items():
             self.runs[k] = self.runs[k] + 1 if v else 0
         # edges_not_found holds until as many frames in a row find every searched edge where the map puts it
-        self._clean = 0 if edges_missing else self._clean + 1
+        self._clean = self._clean + 1 if found else 0
         if self.runs["edges_not_found"] >= c.edges_frames:
             self.edges_latched = True
         elif self._clean >= c.edges_frames:
@@ -98,11 +108,13 @@ class HealthMonitor:
             self.runs["edges_not_found"] = max(self.runs["edges_not_found"], c.edges_frames)
         return [MESSAGES[k].format(n=self.runs[k], factor=inflation) for k in CONDITIONS if self.holds(k)]
 
-    def suspect_edges(self, edges_missing: bool) -> bool:
-        """Whether, with this frame's ``edges_missing``, ``edges_not_found`` will hold after :meth:`update`."""
+    def suspect_edges(self, edges_missing: bool, edges_found: bool | None = None) -> bool:
+        """Whether, with this frame's ``edges_missing`` (and ``edges_found``, :meth:`update`), ``edges_not_found``
+        will hold after :meth:`update`."""
         c = self.config.edges_frames
         if self.edges_latched:
-            return edges_missing or self._clean + 1 < c
+            found = not edges_missing if edges_found is None else edges_found and not edges_missing
+            return not found or self._clean + 1 < c
         return edges_missing and self.runs["edges_not_found"] + 1 >= c
 
     def holds(self, name: str) -> bool:

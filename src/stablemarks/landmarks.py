@@ -859,6 +859,48 @@ def fit_disagreements(camera: StereoCamera, fit: PlaneFit, cov_X, cov_map=None) 
         return 0.0, slope
 
 
+def common_turn(camera: StereoCamera, fits, cov_X, cov_map=None) -> tuple[float, float, float, float]:
+    """One rotation ``δ`` [rad] shared by the slopes of the walls fitted in one frame, and its Mahalanobis² (1 dof)
+    against none.
+
+    Only a rotation turns a wall as the camera sees it (a slip or a kidnap moves the robot, which shifts the walls
+    but leaves their slopes): a head pan off by ``δ`` turns every wall in view by ``δ``, in the same sense. The slopes
+    ``b`` of the fits are, without a turn, ``N(0, S)`` with ``S = J_b Σ_X J_bᵀ + diag(σ_b²)`` (each fit's own slope
+    variance and the map's angle accuracy, ``cov_map`` (2, 2) as in :func:`fit_disagreements`; the pose's share is
+    common to all walls); the turn's direction is ``g = ∂b/∂θ`` (a turn of the head turns them like a turn of the
+    robot). Generalised least squares: ``δ = gᵀS⁻¹b / gᵀS⁻¹g``, Mahalanobis² ``(gᵀS⁻¹b)² / gᵀS⁻¹g``. Each wall
+    alone is :func:`fit_disagreements`' slope test; several walls that each pass it can still share a turn far
+    beyond the heading's uncertainty. Returns ``(δ, Mahalanobis², spread, var_own)``: ``spread`` the Mahalanobis²
+    of the slopes about the shared turn (``n − 1`` dof; walls turned different ways are not one turn) and
+    ``var_own`` the shared turn's variance from the fits alone (without the pose's share); ``(0, 0, 0, ∞)``
+    without fits."""
+    fits = list(fits)
+    if not fits:
+        return 0.0, 0.0, 0.0, np.inf
+    Jb = np.array([seen_wall_jacobian(camera, f)[1] for f in fits])
+    var_map = 0.0 if cov_map is None else float(np.asarray(cov_map, dtype=float)[1, 1])
+    own = np.array([float(f.cov_R[1, 1]) + var_map for f in fits])
+    S = Jb @ np.asarray(cov_X, dtype=float) @ Jb.T + np.diag(own)
+    b = np.array([float(f.b) for f in fits])
+    g = Jb[:, 2]
+    try:
+        Sg = np.linalg.solve(S, g)
+    except np.linalg.LinAlgError:
+        return 0.0, 0.0, 0.0, np.inf
+    info = float(g @ Sg)
+    if not info > 0:
+        return 0.0, 0.0, 0.0, np.inf
+    score = float(Sg @ b)
+    d = score / info
+    r = b - g * d
+    try:
+        spread = float(r @ np.linalg.solve(S, r))
+    except np.linalg.LinAlgError:
+        spread = np.inf
+    var_own = 1.0 / float(np.sum(g**2 / own))
+    return d, score**2 / info, spread, var_own
+
+
 def boundary_disagreement(b: Boundary, plane, X, cov_X) -> tuple[float, float]:
     """How far [m] boundary ``b`` (found from the mean pose ``X``) lies along the wall from the map's free edge,
     inward positive, and the σ of that difference [m]: the boundary's own ``σ_along`` and the pose covariance

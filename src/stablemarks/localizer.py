@@ -34,6 +34,7 @@ from .errors import InputError, expected
 from .estimation import JointEKF, LandmarkEstimate
 from .geometry import SE2, StereoCamera
 from .health import HealthMonitor
+from .landmarks import SLOPE_GATE_CHI2, common_turn
 from .maps import Map
 from .methods import Entered, Method, method_named
 from .pipeline import FrameLandmarks, FrontEnd, Regions, check_pair, disparity_limits, plane_regions, run_front_end
@@ -151,6 +152,49 @@ class Estimate:
     entered: Entered = field(default_factory=Entered)
 
 
+@dataclass(frozen=True)
+class _Turn:
+    """The rotation shared by the walls fitted in one frame (:func:`~stablemarks.landmarks.common_turn`)."""
+
+    angle: float = 0.0
+    """Its estimate [rad] (0 without walls)."""
+    m2: float = 0.0
+    """Its Mahalanobis² against none (1 dof), with the pose's uncertainty."""
+    walls: int = 0
+    spread: float = 0.0
+    """Mahalanobis² of the walls' slopes about it (``walls − 1`` dof)."""
+    var_own: float = np.inf
+    """Its variance from the fits alone [rad²]."""
+    var_heading: float = 0.0
+    """The prior heading's variance when it was measured [rad²]."""
+
+    @property
+    def together(self) -> bool:
+        """Two or more walls turned together from the map: the shared turn beyond ``SLOPE_GATE_CHI2`` (χ²₁ 99.9 %)
+        while the walls agree on it (their spread inside its χ² 99.9 % bound). A single turned wall, or walls turned
+        different ways, may be other surfaces in their bands; a wrong pan turns every wall the same way."""
+        return self.walls >= 2 and self.m2 > SLOPE_GATE_CHI2 and \
+            self.spread <= float(chdtri(self.walls - 1, 0.001))
+
+    def turned_back(self, ref: _Turn) -> bool:
+        """Whether the walls turned back from ``ref`` (a turn seen earlier while the pose followed the odometry)
+        beyond the fits' noise and the heading's drift since (Mahalanobis² of the difference beyond
+        ``SLOPE_GATE_CHI2``): only then is a turn now inside the heading's (grown) uncertainty evidence that the pan
+        is right again."""
+        var = max(self.var_heading - ref.var_heading, 0.0) + self.var_own + ref.var_own
+        return self.walls > 0 and (self.angle - ref.angle) ** 2 / var > SLOPE_GATE_CHI2
+
+
+def _walls_turn(model: FrameLandmarks | None, camera: StereoCamera, world_map: Map) -> _Turn:
+    """The rotation shared by the walls fitted in this frame, from the prior the frame was modelled with."""
+    if model is None or not model.planes:
+        return _Turn()
+    offset, angle = world_map.accuracy
+    cov_map = np.diag([offset, np.tan(angle)]) ** 2
+    d, m2, spread, var_own = common_turn(camera, [m.fit for m in model.planes], model.cov_X, cov_map)
+    return _Turn(d, m2, len(model.planes), spread, var_own, float(model.cov_X[2, 2]))
+
+
 def _edges_missing(model: FrameLandmarks | None, config: Config, width: int) -> bool:
     """Whether most free edges expected in this frame were not found where the map puts them: of the edges
     searched (found, rejected or not found) and those on planes predicted in view but not found at all, fewer
@@ -234,6 +278,8 @@ class Localizer:
             self.ekf.load_prior_landmarks(prior_landmarks, world_map)
         self._dead_reckoning = SE2.from_array(start)
         self._missed: dict[int, int] = {}
+        self._turn_ref: _Turn | None = None
+        """The last turn of the walls together while ``edges_not_found`` may hold (see :meth:`step`)."""
         self.health = HealthMonitor(self.config.health)
         self.retired: dict[int, LandmarkEstimate] = {}
         """Landmarks dropped from the filter, as they were when dropped (id → estimate)."""
@@ -373,7 +419,8 @@ class Localizer:
         front = model = None
         entered = Entered()
         method = self.method
-        nis_high = disagree = edges_missing = False
+        nis_high = disagree = edges_missing = turned = False
+        edges_found = True
         if method.uses_vision:
             check_pair(np.asarray(left), np.asarray(right))
             cam_k = self.camera.with_pan(pan)
@@ -390,7 +437,25 @@ class Localizer:
                 record.n_selected = len(model.selected)
             record.n_pairs = len(front.kept_pairs)
             edges_missing = _edges_missing(model, self.config, self.camera.width)
-            pan_suspect = self.health.suspect_edges(edges_missing)
+            # A wrong pan turns every wall in view the same way (a slip or a kidnap shifts them): walls turned
+            # together are not where the pan says. Nothing is associated, updated or entered from this frame, and
+            # it counts as one whose edges were not found.
+            turn = _walls_turn(model, cam_k, self.world_map)
+            turned = turn.together
+            if turned:
+                self._turn_ref = turn
+                record.warnings.append(
+                    f"the {turn.walls} walls in view are turned {np.degrees(turn.angle):+.1f}° together from the "
+                    f"map's (Mahalanobis² {turn.m2:.0f} with the pose's uncertainty): the head's pan is probably "
+                    "wrong; they are not used")
+            edges_missing = edges_missing or turned
+            # what clears edges_not_found: the walls found where the map puts them, not turned together, and,
+            # after a turn raised it, turned back from it (the heading's uncertainty, grown meanwhile, would
+            # otherwise soon take in the pan's error)
+            edges_found = not edges_missing and turn.m2 <= SLOPE_GATE_CHI2
+            if edges_found and self._turn_ref is not None and self.health.edges_latched:
+                edges_found = turn.turned_back(self._turn_ref)
+            pan_suspect = self.health.suspect_edges(edges_missing, edges_found) or turned
             report: dict = {}
             assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report,
                                                             self._max_incidence)
@@ -410,9 +475,10 @@ class Localizer:
                 # a wrong pan turns the walls; only a pattern that a position shift makes fit is a kidnap
                 probe = self.ekf.copy()
                 _, fits = self._widen_to_fit(max(report["incompatible"], key=len), front, pan, probe)
-                disagree = fits
-                if fits:
+                disagree = fits and not turned
+                if disagree:
                     pan_suspect = edges_missing = False
+                    edges_found = True
             if disagree and self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
                 record.inflation, _ = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
                 assoc = method.associate(self.ekf, front, model, pan, cam_k, max_incidence=self._max_incidence)
@@ -451,7 +517,9 @@ class Localizer:
         record.pan_command = self.command_pan()
         record.health = self.health.update(edges_missing=edges_missing, nis_high=nis_high, disagree=disagree,
                                            observed=bool(record.observed), has_landmarks=self.ekf.n_landmarks > 0,
-                                           inflation=record.inflation)
+                                           inflation=record.inflation, edges_found=edges_found)
+        if not self.health.edges_latched and not turned:
+            self._turn_ref = None
         timings["total"] = time.perf_counter() - t0
         record.timings = timings
         return Estimate(record.stamp, record.pose, record.cov_pose, record.pan_command, list(record.health), record,

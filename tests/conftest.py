@@ -38,3 +38,23 @@ def lab_first_view(lab_scenario, lab_sim, lab_first_frame):
     X0 = lab_sim.poses[0].as_array()
     return process_frame(lab_first_frame.left, lab_first_frame.right, camera, lab_scenario.map, X0, COV_PRIOR,
                          Config.preset("paper"))
+
+
+SCENARIO_NAMES = ("lab", "corridor", "office", "hall")
+
+
+@pytest.fixture(scope="session")
+def scenario_frames():
+    """Two frames of each of :data:`SCENARIO_NAMES` (the first and the middle one): ``(name, k, left, right, camera,
+    map, true pose)``, rendered once per session for the tests that compare a fast path with its reference."""
+    from stablemarks.sim.run import simulate_run
+    from stablemarks.sim.scenario import load_scenario
+
+    out = []
+    for name in SCENARIO_NAMES:
+        run = simulate_run(load_scenario(name))
+        for k in (0, len(run) // 2):
+            f = run.render(k)
+            out.append((name, k, f.left, f.right, run.scenario.camera.with_pan(run.pans[k]), run.scenario.map,
+                        run.poses[k].as_array()))
+    return out

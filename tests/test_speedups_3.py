@@ -16,8 +16,6 @@ from stablemarks.pipeline import (
     prediction_regions,
     run_front_end,
 )
-from stablemarks.sim.run import simulate_run
-from stablemarks.sim.scenario import load_scenario
 from stablemarks.vision.area_stereo import (
     SADConfig,
     _xsobel,
@@ -31,21 +29,7 @@ from stablemarks.vision.segments import extract_vertical_segments
 
 from .test_regions_pipeline import assert_same
 
-SCENARIOS = ("lab", "corridor", "office", "hall")
 COV_PRIOR = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
-
-
-@pytest.fixture(scope="module")
-def frames():
-    """Two frames of each scenario: (name, k, left, right, camera, map, true pose)."""
-    out = []
-    for name in SCENARIOS:
-        run = simulate_run(load_scenario(name))
-        for k in (0, len(run) // 2):
-            f = run.render(k)
-            out.append((name, k, f.left, f.right, run.scenario.camera.with_pan(run.pans[k]), run.scenario.map,
-                        run.poses[k].as_array()))
-    return out
 
 
 def _same_disparity(a, b, where=""):
@@ -55,11 +39,11 @@ def _same_disparity(a, b, where=""):
 
 
 # ------------------------------------------------------------------ the x-Sobel computed once per image
-def test_shared_sobel_gives_the_same_segments_and_disparity(frames):
+def test_shared_sobel_gives_the_same_segments_and_disparity(scenario_frames):
     """The front end computes each image's x-Sobel once for the segments and the SAD prefilter: the same
     segments and disparity images as each computing its own."""
     sad = SADConfig()
-    for name, k, left, right, *_ in frames:
+    for name, k, left, right, *_ in scenario_frames:
         sobel = _pair_sobel(left, right)
         for img, sob in zip((left, right), sobel, strict=True):
             assert_same(extract_vertical_segments(img, sobel=sob), extract_vertical_segments(img), f"{name} {k}")
@@ -76,11 +60,11 @@ def test_segments_reject_a_sobel_of_another_shape():
 
 
 # ------------------------------------------------------------------ the pair prepared once
-def test_regions_on_a_prepared_pair_equal_compute_disparity_regions(frames):
+def test_regions_on_a_prepared_pair_equal_compute_disparity_regions(scenario_frames):
     """SAD in regions on a pair prefiltered once (:func:`prepare_pair`), into fresh arrays or written in place
     into arrays holding earlier pixels: the values of :func:`compute_disparity_regions`."""
     config = Config()
-    for name, k, left, right, camera, world_map, X in frames:
+    for name, k, left, right, camera, world_map, X in scenario_frames:
         reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
         sl = extract_vertical_segments(left)
         pairs = match_segments(sl, extract_vertical_segments(right))
@@ -104,14 +88,14 @@ def test_regions_on_a_prepared_pair_equal_compute_disparity_regions(frames):
             _same_disparity(type(both)(*out), both, f"{name} {k} in place")
 
 
-def test_region_disparity_possible_pixels_from_the_prepared_texture(frames):
+def test_region_disparity_possible_pixels_from_the_prepared_texture(scenario_frames):
     """:meth:`RegionDisparity.possible` sums the prepared ``min(|Sobel_x|, 255)``: the pixels the former
     recomputation of the x-Sobel over a strip around the column gave."""
     sad = SADConfig()
     b = sad.block_size
     r = b // 2
     tex_min = int(np.ceil(8.0 * sad.texture_threshold * b * b))
-    for name, k, left, right, *_ in frames[::3]:
+    for name, k, left, right, *_ in scenario_frames[::3]:
         lazy = RegionDisparity(left, right, sad)
         for image, img in enumerate((left, right)):
             H, W = img.shape
@@ -127,12 +111,12 @@ def test_region_disparity_possible_pixels_from_the_prepared_texture(frames):
                 assert np.array_equal(lazy.possible(image, c), want), (name, k, image, c)
 
 
-def test_front_end_in_regions_equals_the_dense_front_end(frames):
+def test_front_end_in_regions_equals_the_dense_front_end(scenario_frames):
     """The front end with the shared x-Sobel and the prepared pair, in regions, against the dense front end and
     the regions' pixels topped up afterwards (in place) against a fresh dense computation."""
     config = Config()
     topped_up = 0
-    for name, k, left, right, camera, world_map, X in frames:
+    for name, k, left, right, camera, world_map, X in scenario_frames:
         reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
         front = run_front_end(left, right, config, reg)
         dense = run_front_end(left, right, config)
@@ -150,7 +134,7 @@ def test_front_end_in_regions_equals_the_dense_front_end(frames):
     assert topped_up >= 2
 
 
-def test_select_landmarks_reads_the_lazy_images_valid_columns(frames):
+def test_select_landmarks_reads_the_lazy_images_valid_columns(scenario_frames):
     """:func:`select_landmarks` takes the valid columns of a region front end from its :class:`RegionDisparity`
     (kept up to date as pixels are added) instead of scanning the images: the same columns, and the model equals
     the dense front end's."""
@@ -159,7 +143,7 @@ def test_select_landmarks_reads_the_lazy_images_valid_columns(frames):
     from .test_regions_pipeline import assert_same_model
 
     config = Config()
-    for name, k, left, right, camera, world_map, X in frames:
+    for name, k, left, right, camera, world_map, X in scenario_frames:
         reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
         front = run_front_end(left, right, config, reg)
         model = select_landmarks(front, camera, world_map, X, COV_PRIOR, config)
@@ -169,10 +153,10 @@ def test_select_landmarks_reads_the_lazy_images_valid_columns(frames):
             assert (front.lazy.found(0), front.lazy.found(1)) == valid_columns(front.disparity)
 
 
-def test_region_disparity_with_the_opencv_backend(frames):
+def test_region_disparity_with_the_opencv_backend(scenario_frames):
     """A :class:`RegionDisparity` made with the ``opencv`` backend still computes (its prepared pair holds the 8-bit
     images): the masked OpenCV images, topped up in place, and the same possible pixels as the numba one."""
-    name, k, left, right, *_ = frames[0]
+    name, k, left, right, *_ = scenario_frames[0]
     sad = SADConfig(backend="opencv")
     rects_l, rects_r = np.array([[100, 200, 150, 300]]), np.array([[120, 220, 200, 260]])
     lazy = RegionDisparity(left, right, sad, rects_l, rects_r)
@@ -206,7 +190,7 @@ def fuse_point_reference(fit, P, cov_P):
     return P_hat, 0.5 * (cov_hat + np.swapaxes(cov_hat, -1, -2))
 
 
-def test_fuse_point_equals_the_numpy_reference(frames):
+def test_fuse_point_equals_the_numpy_reference(scenario_frames):
     """:meth:`PlaneFit.fuse_point` (one numba loop) against the former NumPy expressions, on the planes fitted in
     the scenarios' frames, for triangulated points and random ones, single points, stacks and broadcast
     covariances: the same points and covariances to 1e-12 of their scale (rounding: the Joseph form cancels)."""
@@ -215,7 +199,7 @@ def test_fuse_point_equals_the_numpy_reference(frames):
     rng = np.random.default_rng(3)
     config = Config()
     n_fits = 0
-    for name, _k, left, right, camera, world_map, X in frames:
+    for name, _k, left, right, camera, world_map, X in scenario_frames:
         model = process_frame(left, right, camera, world_map, X, COV_PRIOR, config)
         cam = config.camera(camera)
         for fit in (f for f in model.fits if f):
@@ -255,7 +239,7 @@ def filter_pairs_reference(pairs, left_segments, disp, mask, tolerance, min_supp
     return (support >= min_support) & (counts > 0)
 
 
-def test_filter_pairs_equals_the_numpy_reference(frames):
+def test_filter_pairs_equals_the_numpy_reference(scenario_frames):
     """:func:`filter_pairs` (one numba loop over the pairs' pixels) keeps the pairs the former NumPy code kept, on
     the scenarios' dense and region disparity images, with several tolerances, supports and radii."""
     from stablemarks.errors import ImageError
@@ -263,7 +247,7 @@ def test_filter_pairs_equals_the_numpy_reference(frames):
 
     config = Config()
     n_dropped = n_kept = 0
-    for name, k, left, right, camera, world_map, X in frames:
+    for name, k, left, right, camera, world_map, X in scenario_frames:
         sl, sr = extract_vertical_segments(left), extract_vertical_segments(right)
         pairs = match_segments(sl, sr)
         reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
@@ -285,13 +269,13 @@ def test_filter_pairs_equals_the_numpy_reference(frames):
 
 
 # ------------------------------------------------------------------ segments sorted by column
-def test_segments_are_sorted_as_by_subset(frames):
+def test_segments_are_sorted_as_by_subset(scenario_frames):
     """:func:`extract_vertical_segments` puts the segments in column order with their pixel blocks in one pass:
     the same :class:`Segments`, field by field and dtype by dtype, as the former ``subset(argsort(u))`` of the
     unsorted ones."""
     from stablemarks.vision import segments as S
 
-    for name, k, left, right, *_ in frames:
+    for name, k, left, right, *_ in scenario_frames:
         for img in (left, right, left.astype(np.float32)):
             got = extract_vertical_segments(img)
             # the former way: the unsorted segments, then subset

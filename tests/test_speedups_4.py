@@ -12,32 +12,16 @@ import pytest
 from stablemarks.config import Config
 from stablemarks.landmarks import _boundary_columns
 from stablemarks.pipeline import plane_regions, run_front_end, select_landmarks
-from stablemarks.sim.run import simulate_run
-from stablemarks.sim.scenario import load_scenario
 
-SCENARIOS = ("lab", "corridor", "office", "hall")
 COV_PRIOR = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
 
 
 @pytest.fixture(scope="module")
-def frames():
-    """Two frames of each scenario: (name, k, left, right, camera, map, true pose)."""
-    out = []
-    for name in SCENARIOS:
-        run = simulate_run(load_scenario(name))
-        for k in (0, len(run) // 2):
-            f = run.render(k)
-            out.append((name, k, f.left, f.right, run.scenario.camera.with_pan(run.pans[k]), run.scenario.map,
-                        run.poses[k].as_array()))
-    return out
-
-
-@pytest.fixture(scope="module")
-def models(frames):
+def models(scenario_frames):
     """The landmark model of every frame (the pipeline in regions, from the true pose)."""
     config = Config()
     out = []
-    for name, k, left, right, camera, world_map, X in frames:
+    for name, k, left, right, camera, world_map, X in scenario_frames:
         reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
         front = run_front_end(left, right, config, reg)
         out.append((name, k, front, select_landmarks(front, camera, world_map, X, COV_PRIOR, config)))
@@ -138,7 +122,7 @@ def associate_joint_reference(ekf, measured, pan=0.0, candidates=None, extra_cos
     return sorted(chosen, key=lambda q: q[1])
 
 
-def test_associate_joint_equals_the_reference(frames, models):
+def test_associate_joint_equals_the_reference(scenario_frames, models):
     """The filter after each frame (a wall landmark per selected candidate), its pose moved a little and its
     measurements shifted and shuffled so that pairs compete: the same pairs as the former association, and the
     trial sets' joint NIS from the projections made once equal :meth:`JointEKF.joint_nis` bit for bit."""
@@ -147,7 +131,7 @@ def test_associate_joint_equals_the_reference(frames, models):
     config = Config()
     rng = np.random.default_rng(7)
     compared = 0
-    for (name, k, _l, _r, camera, world_map, X), (_, _, front, model) in zip(frames, models, strict=True):
+    for (name, k, _l, _r, camera, world_map, X), (_, _, front, model) in zip(scenario_frames, models, strict=True):
         if not model.selected:
             continue
         pairs = front.kept_pairs

@@ -738,8 +738,7 @@ def landmarks_on_plane(
     ``border_sigma_px``: see :func:`search_boundary`.
     """
     if cov_X is not None:
-        offset, angle = world_map.accuracy if world_map is not None else (0.0, 0.0)
-        cov_map = np.diag([offset, np.tan(angle)]) ** 2
+        cov_map = world_map.accuracy_cov if world_map is not None else np.zeros((2, 2))
         m2, m2_slope = fit_disagreements(camera, fit, cov_X, cov_map)
         if m2 > config.fit_gate_chi2:
             # A wall turned from the map (a wrong pan turns every wall like this): its free edges in view were

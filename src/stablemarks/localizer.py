@@ -189,9 +189,7 @@ def _walls_turn(model: FrameLandmarks | None, camera: StereoCamera, world_map: M
     """The rotation shared by the walls fitted in this frame, from the prior the frame was modelled with."""
     if model is None or not model.planes:
         return _Turn()
-    offset, angle = world_map.accuracy
-    cov_map = np.diag([offset, np.tan(angle)]) ** 2
-    d, m2, spread, var_own = common_turn(camera, [m.fit for m in model.planes], model.cov_X, cov_map)
+    d, m2, spread, var_own = common_turn(camera, [m.fit for m in model.planes], model.cov_X, world_map.accuracy_cov)
     return _Turn(d, m2, len(model.planes), spread, var_own, float(model.cov_X[2, 2]))
 
 

@@ -154,6 +154,13 @@ class Map:
         if dup:
             raise ConfigError(f"{self.source or 'map'}: planes: duplicate id {dup[0]!r}")
 
+    @property
+    def accuracy_cov(self) -> np.ndarray:
+        """(2, 2) covariance of a mapped wall's offset [m] and slope from :attr:`accuracy`, as the fitted-wall tests
+        take it (:func:`~stablemarks.landmarks.fit_disagreements`, :func:`~stablemarks.landmarks.common_turn`)."""
+        offset, angle = self.accuracy
+        return np.diag([offset, np.tan(angle)]) ** 2
+
     def __getitem__(self, plane_id: str) -> ReferencePlane:
         for p in self.planes:
             if p.id == plane_id:

@@ -635,13 +635,15 @@ class JointEKF:
         pred = self.predict_observation(None, pan)
         keep = pred.in_view.copy()
         if max_incidence is not None and len(keep):
-            centre = self._camera(pan).optical_centres(self._x[:3])[0]
-            for r, i in enumerate(pred.ids):
-                t = self._tracks[int(i)]
-                if keep[r] and t.kind == "wall":
-                    view = self.landmark_position(int(i)) - centre
-                    cos = abs(float(view @ t.plane.normal)) / max(float(np.hypot(*view)), 1e-12)
-                    keep[r] = cos >= np.cos(max_incidence)
+            rows = np.flatnonzero(keep)
+            walls = [self._tracks[int(i)].plane for i in self._ids[rows]]
+            rows = np.array([r for r, w in zip(rows, walls, strict=True) if w is not None], dtype=int)
+            if len(rows):
+                normals = np.array([w.normal for w in walls if w is not None])
+                view = self._start[rows] + np.einsum("mij,mj->mi", self._J_p_l[rows], self._x[self._idx2[rows]])
+                view -= self._camera(pan).optical_centres(self._x[:3])[0]
+                cos = np.abs(np.einsum("mi,mi->m", view, normals)) / np.maximum(np.linalg.norm(view, axis=1), 1e-12)
+                keep[rows] = cos >= np.cos(max_incidence)
         return [int(i) for i in pred.ids[keep]]
 
     def observation_model(self, ids: Sequence[int], pan: float = 0.0

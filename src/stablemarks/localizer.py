@@ -383,7 +383,8 @@ class Localizer:
         _, U = self._increment(odometry)
         if U is not None:
             X = motion(X, U)
-        return choose_pan(self.config.pan, self.world_map, self.camera, X, self._pan, ekf=self.ekf, dt=self._dt)
+        return choose_pan(self.config.pan, self.world_map, self.camera, X, self._pan, ekf=self.ekf, dt=self._dt,
+                          max_incidence=self._max_incidence)
 
     def step(self, stamp: float, left: np.ndarray, right: np.ndarray, *, odometry=None, pan: float = 0.0
              ) -> Estimate:

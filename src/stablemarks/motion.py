@@ -188,21 +188,31 @@ def plan_path(start: SE2, steps: Iterable[PathStep], frame_spacing: float = 0.1,
 
 # ------------------------------------------------------------- pan policy
 def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple[float, float],
-                       default: float = 0.0, max_range: float = 12.0) -> float:
+                       default: float = 0.0, max_range: float = 12.0, max_incidence: float | None = None,
+                       view_fraction: float = 0.8) -> float:
     """Pan angle [rad] that points the stereo head at the midpoint of the free edges in sight (paper Sec 6).
 
     The free edges of the map's reference planes are in sight from robot pose ``X`` (3,) — the robot's
     *belief*, not the truth — when they lie within ``max_range`` [m] of the pan axis (the left optical
     centre), within the pan ``limits`` (min, max) [rad] widened by half the field of view, on a side their
-    wall faces, and no other wall of the map blocks the sight line. The result is clamped to ``limits``;
-    with no free edge in sight it is ``default`` (clamped), e.g. the previous pan.
+    wall faces, no other wall of the map blocks the sight line and, with ``max_incidence`` [rad], the sight
+    line meets their wall within that angle of its normal (at a more grazing angle nothing is modelled or
+    associated there: ``landmarks.max_incidence_deg``).
+
+    The paper's head looks at the midpoint of all of them; its edges all fitted in one view. Where they do
+    not, their midpoint can show none of them (office: a partition's two ends at +35° and +75° and a
+    whiteboard's at −90° and −40°: the midpoint looked at a bare stretch of partition for 15 frames). So
+    the head looks at the midpoint of the largest group of edges whose bearings span at most
+    ``view_fraction`` of the horizontal field of view (ties: the group whose pan is nearest ``default``);
+    when all of them fit, that is the paper's midpoint. The result is clamped to ``limits``; with no free
+    edge in sight it is ``default`` (clamped), e.g. the previous pan.
     """
     lo, hi = limits
     X = np.asarray(X, dtype=float)
     centre = camera.camera_pose(X).translation
     walls = world_map.segments()
     reach = camera.half_fov
-    points = []
+    points, bearings = [], []
     for k, plane in enumerate(world_map.planes):
         if not plane.reference or not plane.faces(centre):
             continue
@@ -213,10 +223,23 @@ def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple
             bearing = float(wrap_angle(math.atan2(rel[1], rel[0]) - X[2]))
             if not (1e-6 < dist <= max_range and lo - reach <= bearing <= hi + reach):
                 continue
+            if max_incidence is not None and abs(float(plane.normal @ rel)) < dist * math.cos(max_incidence):
+                continue
             if segments_block(centre, p, walls, exclude=[k])[0]:
                 continue
             points.append(p)
+            bearings.append(bearing)
     if not points:
         return float(np.clip(default, lo, hi))
-    mid = np.mean(points, axis=0) - centre
-    return float(np.clip(wrap_angle(math.atan2(mid[1], mid[0]) - X[2]), lo, hi))
+    order = np.argsort(bearings)
+    b = np.asarray(bearings)[order]
+    span = 2.0 * reach * view_fraction
+    groups = [order[i:int(np.searchsorted(b, b[i] + span, side="right"))] for i in range(len(b))]
+    most = max(len(g) for g in groups)
+
+    def pan_of(group) -> float:
+        mid = np.mean([points[i] for i in group], axis=0) - centre
+        return float(np.clip(wrap_angle(math.atan2(mid[1], mid[0]) - X[2]), lo, hi))
+
+    pans = [pan_of(g) for g in groups if len(g) == most]
+    return min(pans, key=lambda a: abs(float(wrap_angle(a - default))))

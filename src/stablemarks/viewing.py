@@ -74,15 +74,17 @@ class PanConfig:
 
 
 def choose_pan(config: PanConfig, world_map: Map, camera: StereoCamera, X, previous: float | None = None, *,
-               ekf=None, dt: float | None = None) -> float:
+               ekf=None, dt: float | None = None, max_incidence: float | None = None) -> float:
     """The pan [rad] ``config.policy`` chooses for a frame taken at the believed pose ``X`` (3,), given the
     ``previous`` pan (None before the first frame), the filter ``ekf`` (for ``information``; its pose is
-    ignored, ``X`` is used) and the frame interval ``dt`` [s] (None: the head reaches any pan)."""
+    ignored, ``X`` is used) and the frame interval ``dt`` [s] (None: the head reaches any pan).
+    ``max_incidence`` [rad]: free edges on walls seen more obliquely are not looked for (nothing is modelled
+    or associated there; :func:`~stablemarks.motion.look_at_free_edges`)."""
     lo, hi = config.limits
     start = config.angle if previous is None else previous
     if config.policy == "fixed":
         return float(np.clip(config.angle, lo, hi))
-    paper = look_at_free_edges(world_map, camera, X, limits=(lo, hi), default=start)
+    paper = look_at_free_edges(world_map, camera, X, limits=(lo, hi), default=start, max_incidence=max_incidence)
     if config.policy == "free_edges" or ekf is None:
         return paper
     reach = np.inf if dt is None or previous is None else config.max_rate * dt

@@ -44,7 +44,9 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
 
     ``report`` (a dict, filled when given): ``"compatible"`` the wall patterns kept, ``"incompatible"`` those
     matched along their wall but jointly incompatible with the predicted pose (evidence that the odometry and
-    the images disagree).
+    the images disagree), ``"ambiguous"`` the matchings left out because another one fits as well (two
+    offsets of a wall's pattern, or another line or landmark in an image gate, jointly compatible with the
+    rest: the pose is too uncertain to tell them apart).
     """
     if polarity is None or centre is None:
         polarity, centre = np.zeros(len(measured), dtype=int), np.zeros(2)
@@ -67,18 +69,20 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     # is not evidence against the odometry.
     chosen: list[tuple[int, int]] = []
     kept, rejected = [], []
+    ambiguous: list[list[tuple[int, int]]] = []
     for options in sorted(walls, key=lambda o: len(o[0]), reverse=True):
-        for matched in options:
-            if len(matched) < len(options[0]) - 1:
-                continue  # far fewer features than the best offset explains: not an alternative
-            if ekf.joint_compatible(chosen + matched, measured, pan):
-                chosen += matched
-                kept.append(matched)
-                break
-        else:
+        fits = [m for m in options if len(m) >= len(options[0]) - 1  # far fewer features: not an alternative
+                and ekf.joint_compatible(chosen + m, measured, pan)]
+        if not fits:
             rejected.append(options[0])
-    if report is not None:
-        report["compatible"], report["incompatible"] = kept, rejected
+        elif any(_conflict(fits[0], m) for m in fits[1:]):
+            # two offsets that pair a landmark with different lines both fit the prediction: the pose is too
+            # uncertain to tell them apart (after a blind stretch), and the wrong one would pull it a whole
+            # feature spacing off with a collapsed covariance. Neither is taken.
+            ambiguous.append(fits[0])
+        else:
+            chosen += fits[0]
+            kept.append(fits[0])
     taken_l = {i for i, _ in chosen}
     taken_p = {j for _, j in chosen}
     # A wall whose pattern of two or more features was matched places every feature on it to a few mm: a wall
@@ -91,12 +95,56 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     if rest and free:
         cost = height_cost(ekf, pairs, pan) + polarity_cost(ekf, polarity, centre)
         rows = [ekf.landmark_ids.index(i) for i in rest]
-        sub = ekf.associate_joint(measured[free], pan, candidates=rest, extra_cost=cost[np.ix_(rows, free)])
+        extra = cost[np.ix_(rows, free)]
+        sub = ekf.associate_joint(measured[free], pan, candidates=rest, extra_cost=extra)
+        taken = []
         for i, j in sub:
             trial = chosen + [(i, free[j])]
             if ekf.joint_compatible(trial, measured, pan):
                 chosen = trial
+                taken.append((i, free[j]))
+        if taken:
+            alone = _ambiguous_in_gates(ekf, measured, pan, rest, free, extra, chosen, taken)
+            if alone:
+                ambiguous.append(alone)
+                chosen = [q for q in chosen if q not in alone]
+    if report is not None:
+        report["compatible"], report["incompatible"], report["ambiguous"] = kept, rejected, ambiguous
     return sorted(chosen, key=lambda q: q[1])
+
+
+def _conflict(a: list[tuple[int, int]], b: list[tuple[int, int]]) -> bool:
+    """Whether two matchings pair one landmark with different lines, or one line with different landmarks."""
+    la, pa = dict(a), {j: i for i, j in a}
+    return any((i in la and la[i] != j) or (j in pa and pa[j] != i) for i, j in b)
+
+
+def _ambiguous_in_gates(ekf: JointEKF, measured: np.ndarray, pan: float, rest: list[int], free: list[int],
+                        extra: np.ndarray, chosen: list[tuple[int, int]], taken: list[tuple[int, int]]
+                        ) -> list[tuple[int, int]]:
+    """The image-gated pairs of ``taken`` (a part of ``chosen``) that another pairing would explain as well:
+    another free line in the landmark's gate, or another landmark whose gate holds the line, with which the
+    whole set stays jointly compatible. While the pose is well known the gates are a few pixels wide and hold
+    one line; after a blind stretch they span several, and the nearest is as likely another feature of the
+    same wall (office: a partition's landmark whose own line was not found, taken by the next panel joint
+    40 px away, pulled the pose 0.2 m off with a collapsed covariance)."""
+    ids, _, d2, cost = ekf._association_costs(measured[free], pan, rest, extra)
+    row = {int(i): r for r, i in enumerate(ids)}
+    col = {j: c for c, j in enumerate(free)}
+    ok = (d2 <= ekf.config.gate) & np.isfinite(cost)
+    used_l = {i for i, _ in chosen}
+    used_p = {j for _, j in chosen}
+    out = []
+    for i, j in taken:
+        others = [q for q in chosen if q != (i, j)]
+        r, c = row.get(int(i)), col.get(j)
+        if r is None or c is None:
+            continue
+        alts = [(i, free[c2]) for c2 in np.flatnonzero(ok[r]) if free[c2] not in used_p]
+        alts += [(int(ids[r2]), j) for r2 in np.flatnonzero(ok[:, c]) if int(ids[r2]) not in used_l]
+        if any(ekf.joint_compatible(others + [q], measured, pan) for q in alts):
+            out.append((i, j))
+    return out
 
 
 def match_along_wall(ekf: JointEKF, plane, candidates, tol: float = 3.0,

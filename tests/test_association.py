@@ -165,7 +165,8 @@ def test_image_association_never_pairs_opposite_polarity_even_when_closest():
     measured = np.stack([uv, uv + 2.0])  # the nearest one has the opposite step
     image = np.array([-1, 1])
     assert associate_frame(ekf, _Pairs(2), measured, 0.0, None, image, RIGHT_SIDE) == [(lm, 1)]
-    assert associate_frame(ekf, _Pairs(2), measured, 0.0) == [(lm, 0)]  # polarity unknown: the nearest
+    # polarity unknown: both lines fit its gate, neither is taken (which one it is cannot be told)
+    assert associate_frame(ekf, _Pairs(2), measured, 0.0) == []
     # from the wall's other side the same image polarities mean the opposite steps along the wall
     assert associate_frame(ekf, _Pairs(2), measured, 0.0, None, image, LEFT_SIDE) == [(lm, 0)]
 
@@ -244,3 +245,39 @@ def test_a_wall_landmark_seen_at_a_grazing_angle_is_not_visible_for_association(
     measured = _predicted(ekf, [front, side])  # both measured exactly where predicted
     assert sorted(associate_frame(ekf, _Pairs(2), measured, 0.0)) == sorted([(front, 0), (side, 1)])
     assert associate_frame(ekf, _Pairs(2), measured, 0.0, max_incidence=np.radians(60.0)) == [(front, 0)]
+
+
+# ------------------------------------------------------------------ ambiguity
+WIDE = np.diag([0.10, 0.10, np.deg2rad(6.0)]) ** 2  # after a blind stretch: gates span several features
+
+
+def test_an_image_gate_holding_two_fitting_lines_takes_neither_when_the_pose_is_uncertain():
+    for cov, expect in ((COV_POSE, True), (WIDE, False)):
+        ekf = _ekf(s=(0.9,), polarity=(0,), ekf=JointEKF(CAMERA, X0, cov))
+        (lm,) = ekf.landmark_ids
+        uv = _predicted(ekf, [lm])[0]
+        measured = np.stack([uv + 1.0, uv + 25.0])  # its line and another feature 25 px away
+        report: dict = {}
+        got = associate_frame(ekf, _Pairs(2), measured, 0.0, report=report)
+        if expect:  # a confident pose: the other line is far outside the gate
+            assert got == [(lm, 0)] and not report["ambiguous"]
+        else:  # both lines fit: the nearer is as likely the neighbour of a line that was not found
+            assert got == [] and report["ambiguous"] == [[(lm, 0)]]
+
+
+def test_a_walls_pattern_that_fits_at_two_offsets_is_not_taken_when_the_pose_is_uncertain(monkeypatch):
+    s = (0.5, 0.9, 1.3, 1.7)  # regularly spaced, same polarity: shifted by one spacing, three still match
+    for cov, expect in ((COV_POSE, True), (WIDE, False)):
+        ekf = _ekf(WALL, s, (0, 0, 0, 0), ekf=JointEKF(CAMERA, X0, cov))
+        ids = ekf.landmark_ids
+        measured = _predicted(ekf, ids)
+        cands = [_cand(WALL, si, k, sigma_b=0.5) for k, si in enumerate(s)]
+        model = SimpleNamespace(planes=[SimpleNamespace(fit=SimpleNamespace(plane=WALL), candidates=cands)])
+        assert len(match_along_wall(ekf, WALL, cands, every=True)) >= 2  # several offsets match
+        monkeypatch.setattr(ekf, "associate_joint", lambda *args, **kwargs: [])  # the pattern step alone
+        report: dict = {}
+        got = associate_frame(ekf, _Pairs(4), measured, 0.0, model, report=report)
+        if expect:
+            assert got == list(zip(ids, range(4), strict=True)) and not report["ambiguous"]
+        else:
+            assert got == [] and len(report["ambiguous"]) == 1

@@ -107,7 +107,7 @@ def associate_joint_reference(ekf, measured, pan=0.0, candidates=None, extra_cos
     which projects the trial's landmarks again."""
     from scipy.special import chdtri
 
-    ids, z, d2, cost = ekf._association_costs(measured, pan, candidates, extra_cost)
+    ids, z, d2, cost = ekf.association_costs(measured, pan, candidates, extra_cost)
     order = [(r, c) for r, c in zip(*np.nonzero((d2 <= ekf.config.gate) & np.isfinite(cost)), strict=True)]
     order.sort(key=lambda rc: cost[rc])
     chosen, used_r, used_c = [], set(), set()

@@ -136,9 +136,8 @@ def _ambiguous_in_gates(ekf: JointEKF, measured: np.ndarray, pan: float, rest: l
     another free line in the landmark's gate, or another landmark whose gate holds the line, with which the
     whole set stays jointly compatible. While the pose is well known the gates are a few pixels wide and hold
     one line; after a blind stretch they span several, and the nearest is as likely another feature of the
-    same wall (office: a partition's landmark whose own line was not found, taken by the next panel joint
-    40 px away, pulled the pose 0.2 m off with a collapsed covariance)."""
-    ids, _, d2, cost = ekf._association_costs(measured[free], pan, rest, extra)
+    same wall, whose update would pull the pose a feature spacing off with a collapsed covariance."""
+    ids, _, d2, cost = ekf.association_costs(measured[free], pan, rest, extra)
     row = {int(i): r for r, i in enumerate(ids)}
     col = {j: c for c, j in enumerate(free)}
     ok = (d2 <= ekf.config.gate) & np.isfinite(cost)

@@ -669,7 +669,7 @@ class JointEKF:
         return h, H
 
     # ------------------------------------------------------------- association
-    def _association_costs(self, measured, pan, candidates, extra_cost):
+    def association_costs(self, measured, pan, candidates, extra_cost):
         """Landmarks in view ``ids`` (c,), measurements ``z`` (k, 2), squared Mahalanobis distances ``d2``
         (c, k) and ``cost`` = ``d2`` + ``extra_cost`` (its rows in the order of ``candidates``)."""
         z = np.asarray(measured, dtype=float).reshape(-1, 2) if np.size(measured) else np.zeros((0, 2))
@@ -711,7 +711,7 @@ class JointEKF:
 
         Returns ``[(landmark id, measurement index), …]`` sorted by measurement index.
         """
-        ids, z, d2, cost = self._association_costs(measured, pan, candidates, extra_cost)
+        ids, z, d2, cost = self.association_costs(measured, pan, candidates, extra_cost)
         feasible = (d2 <= self.config.gate) & np.isfinite(cost)
         if not feasible.any():
             return []
@@ -763,7 +763,7 @@ class JointEKF:
         the joint NIS of the set stays inside the χ² gate of ``2n`` dof (sequential compatible nearest
         neighbour, a greedy form of joint compatibility). An infinite ``extra_cost`` forbids a pair.
         """
-        ids, z, d2, cost = self._association_costs(measured, pan, candidates, extra_cost)
+        ids, z, d2, cost = self.association_costs(measured, pan, candidates, extra_cost)
         order = [(r, c) for r, c in zip(*np.nonzero((d2 <= self.config.gate) & np.isfinite(cost)), strict=True)]
         order.sort(key=lambda rc: cost[rc])
         chosen: list[tuple[int, int]] = []

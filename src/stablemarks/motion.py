@@ -189,7 +189,7 @@ def plan_path(start: SE2, steps: Iterable[PathStep], frame_spacing: float = 0.1,
 # ------------------------------------------------------------- pan policy
 def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple[float, float],
                        default: float = 0.0, max_range: float = 12.0, max_incidence: float | None = None,
-                       usable_fov: float = 0.9) -> float:
+                       view_fraction: float = 0.8) -> float:
     """Pan angle [rad] that points the stereo head at the midpoint of the free edges in sight (paper Sec 6).
 
     The free edges of the map's reference planes are in sight from robot pose ``X`` (3,) — the robot's
@@ -201,12 +201,11 @@ def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple
 
     The paper's head looks at the midpoint of all of them; its edges all fitted in one view. Where they do
     not, their midpoint can show none of them (office: a partition's two ends at +35° and +75° and a
-    whiteboard's at −90° and −40°: the midpoint looked at a bare stretch of partition for 15 frames). So the
-    pan is the one, among the midpoint of all and the midpoints of each group of edges that fits in the view,
-    that shows the most edges within ``usable_fov`` of the half field of view from the image centre (a search
-    window needs room at the border); ties go to the paper's midpoint, then to the pan nearest ``default``.
-    When the midpoint shows them all, that is the paper's rule. The result is clamped to ``limits``; with no
-    free edge in sight it is ``default`` (clamped), e.g. the previous pan.
+    whiteboard's at −90° and −40°: the midpoint looked at a bare stretch of partition for 15 frames). So
+    the head looks at the midpoint of the largest group of edges whose bearings span at most
+    ``view_fraction`` of the horizontal field of view (ties: the group whose pan is nearest ``default``);
+    when all of them fit, that is the paper's midpoint. The result is clamped to ``limits``; with no free
+    edge in sight it is ``default`` (clamped), e.g. the previous pan.
     """
     lo, hi = limits
     X = np.asarray(X, dtype=float)
@@ -232,24 +231,15 @@ def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple
             bearings.append(bearing)
     if not points:
         return float(np.clip(default, lo, hi))
-    b = np.asarray(bearings)
-    half = usable_fov * reach
+    order = np.argsort(bearings)
+    b = np.asarray(bearings)[order]
+    span = 2.0 * reach * view_fraction
+    groups = [order[i:int(np.searchsorted(b, b[i] + span, side="right"))] for i in range(len(b))]
+    most = max(len(g) for g in groups)
 
     def pan_of(group) -> float:
         mid = np.mean([points[i] for i in group], axis=0) - centre
         return float(np.clip(wrap_angle(math.atan2(mid[1], mid[0]) - X[2]), lo, hi))
 
-    def shown(pan: float) -> int:
-        return int(np.sum(np.abs(wrap_angle(b - pan)) <= half + 1e-9))
-
-    paper = pan_of(range(len(points)))
-    order = np.argsort(b)
-    bs = b[order]
-    groups = [order[i:int(np.searchsorted(bs, bs[i] + 2.0 * half, side="right"))] for i in range(len(bs))]
-    pans = [paper] + [pan_of(g) for g in groups]
-    counts = [shown(p) for p in pans]
-    best = max(counts)
-    if counts[0] == best:
-        return paper
-    return min((p for p, c in zip(pans, counts, strict=True) if c == best),
-               key=lambda a: abs(float(wrap_angle(a - default))))
+    pans = [pan_of(g) for g in groups if len(g) == most]
+    return min(pans, key=lambda a: abs(float(wrap_angle(a - default))))

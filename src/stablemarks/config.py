@@ -71,7 +71,9 @@ class NoiseConfig:
     one frame and of one line over frames are not independent, and a filter taking them as independent at that
     level is overconfident (room's pose NEES 16 with 0.1 px). ``stablemarks calibrate-noise`` measures the
     line noise and then the smallest multiple of it with which the filter is consistent on recordings with
-    ground truth: 0.25 px here (pose NEES 3.7 on room, 3.9 on corridor, 2.0 on office)."""
+    ground truth: 0.25 px here (pose NEES 3.7 on room, 3.9 on corridor, 2.0 on office). With the association and
+    pan rules of December 2026, 0.15 px was tried (``stablemarks eval``, 8–10 trials): lab 1.3 → 2.0 and hall
+    2.1 → 3.1, but room 2.6 → 7.1 and office overconfident over its first 40 frames (NEES 5–11); not adopted."""
 
     boundary_px: float | None = 2.0
     """σ of a boundary's column when a member segment marks the edge (Sec 3.2: the boundary moved to the

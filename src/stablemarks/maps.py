@@ -115,6 +115,14 @@ class ReferencePlane:
             return side < 0
         return side != 0
 
+    def seen_within(self, viewpoint, point, max_incidence: float | None) -> bool:
+        """Whether the sight line from ``viewpoint`` (2,) to ``point`` (2,) [m] meets the wall within
+        ``max_incidence`` [rad] of its normal (None: always)."""
+        if max_incidence is None:
+            return True
+        rel = np.asarray(point, dtype=float) - np.asarray(viewpoint, dtype=float)
+        return abs(float(self.normal @ rel)) >= float(np.hypot(*rel)) * math.cos(max_incidence)
+
     def to_dict(self) -> dict:
         d = {
             "id": self.id,

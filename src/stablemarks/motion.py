@@ -223,7 +223,7 @@ def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple
             bearing = float(wrap_angle(math.atan2(rel[1], rel[0]) - X[2]))
             if not (1e-6 < dist <= max_range and lo - reach <= bearing <= hi + reach):
                 continue
-            if max_incidence is not None and abs(float(plane.normal @ rel)) < dist * math.cos(max_incidence):
+            if not plane.seen_within(centre, p, max_incidence):
                 continue
             if segments_block(centre, p, walls, exclude=[k])[0]:
                 continue

@@ -126,9 +126,7 @@ def expected_information(ekf, world_map: Map, camera: StereoCamera, X, pan: floa
                 continue
             for e in plane.free_edges:
                 p = plane.edge(e)
-                rel = p - centre
-                if max_incidence is not None and \
-                        abs(float(plane.normal @ rel)) < float(np.hypot(*rel)) * math.cos(max_incidence):
+                if not plane.seen_within(centre, p, max_incidence):
                     continue
                 uv = cam.project_columns(X, p)
                 if not (np.all(np.isfinite(uv)) and np.all(cam.in_image(uv, 10.0))):

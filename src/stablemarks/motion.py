@@ -189,7 +189,7 @@ def plan_path(start: SE2, steps: Iterable[PathStep], frame_spacing: float = 0.1,
 # ------------------------------------------------------------- pan policy
 def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple[float, float],
                        default: float = 0.0, max_range: float = 12.0, max_incidence: float | None = None,
-                       view_fraction: float = 0.8) -> float:
+                       view_fraction: float | None = 0.8) -> float:
     """Pan angle [rad] that points the stereo head at the midpoint of the free edges in sight (paper Sec 6).
 
     The free edges of the map's reference planes are in sight from robot pose ``X`` (3,) — the robot's
@@ -204,8 +204,11 @@ def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple
     whiteboard's at −90° and −40°: the midpoint looked at a bare stretch of partition for 15 frames). So
     the head looks at the midpoint of the largest group of edges whose bearings span at most
     ``view_fraction`` of the horizontal field of view (ties: the group whose pan is nearest ``default``);
-    when all of them fit, that is the paper's midpoint. The result is clamped to ``limits``; with no free
-    edge in sight it is ``default`` (clamped), e.g. the previous pan.
+    when all of them fit, that is the paper's midpoint. ``view_fraction=None``: the paper's rule as it
+    stands, the midpoint of all (the simulator's own head, which reproduces the paper's experiment: in the
+    lab at 2 m the edges span more than 80 % of the view and the midpoint still shows every feature of
+    Table 1). The result is clamped to ``limits``; with no free edge in sight it is ``default`` (clamped),
+    e.g. the previous pan.
     """
     lo, hi = limits
     X = np.asarray(X, dtype=float)
@@ -233,7 +236,7 @@ def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple
         return float(np.clip(default, lo, hi))
     order = np.argsort(bearings)
     b = np.asarray(bearings)[order]
-    span = 2.0 * reach * view_fraction
+    span = np.inf if view_fraction is None else 2.0 * reach * view_fraction
     groups = [order[i:int(np.searchsorted(b, b[i] + span, side="right"))] for i in range(len(b))]
     most = max(len(g) for g in groups)
 

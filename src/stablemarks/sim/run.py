@@ -99,5 +99,5 @@ def simulate_run(scenario: Scenario, seed: int | None = None) -> Run:
         else:
             default = pans[-1] if pans else plan.pan.angle
             pans.append(look_at_free_edges(world_map, scenario.camera, X.as_array(), limits=scenario.pan_limits,
-                                           default=default))
+                                           default=default, view_fraction=None))
     return Run(scenario, seed, tuple(poses), tuple(odometry), tuple(believed), tuple(pans))

@@ -318,7 +318,7 @@ class LapSource(SimulatedSource):
         if pan.policy == "fixed":
             return float(np.clip(pan.angle, *sc.pan_limits))
         return look_at_free_edges(self.world_map, self.camera, believed.as_array(), limits=sc.pan_limits,
-                                  default=pan.angle if previous is None else previous)
+                                  default=pan.angle if previous is None else previous, view_fraction=None)
 
     def frame(self, k: int, pan: float | None = None):
         raise NotImplementedError("LapSource makes its frames in order: iterate over it")

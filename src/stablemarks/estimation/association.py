@@ -96,7 +96,8 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
         cost = height_cost(ekf, pairs, pan) + polarity_cost(ekf, polarity, centre)
         rows = [ekf.landmark_ids.index(i) for i in rest]
         extra = cost[np.ix_(rows, free)]
-        sub = ekf.associate_joint(measured[free], pan, candidates=rest, extra_cost=extra)
+        gates = ekf.association_costs(measured[free], pan, rest, extra)
+        sub = ekf.associate_joint(measured[free], pan, candidates=rest, extra_cost=extra, costs=gates)
         taken = []
         for i, j in sub:
             trial = chosen + [(i, free[j])]
@@ -104,7 +105,7 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
                 chosen = trial
                 taken.append((i, free[j]))
         if taken:
-            alone = _ambiguous_in_gates(ekf, measured, pan, rest, free, extra, chosen, taken)
+            alone = _ambiguous_in_gates(ekf, measured, pan, free, gates, chosen, taken)
             if alone:
                 ambiguous.append(alone)
                 chosen = [q for q in chosen if q not in alone]
@@ -129,15 +130,15 @@ def _conflict(a: list[tuple[int, int]], b: list[tuple[int, int]]) -> bool:
     return any((i in la and la[i] != j) or (j in pa and pa[j] != i) for i, j in b)
 
 
-def _ambiguous_in_gates(ekf: JointEKF, measured: np.ndarray, pan: float, rest: list[int], free: list[int],
-                        extra: np.ndarray, chosen: list[tuple[int, int]], taken: list[tuple[int, int]]
-                        ) -> list[tuple[int, int]]:
+def _ambiguous_in_gates(ekf: JointEKF, measured: np.ndarray, pan: float, free: list[int], gates,
+                        chosen: list[tuple[int, int]], taken: list[tuple[int, int]]) -> list[tuple[int, int]]:
     """The image-gated pairs of ``taken`` (a part of ``chosen``) that another pairing would explain as well:
     another free line in the landmark's gate, or another landmark whose gate holds the line, with which the
     whole set stays jointly compatible. While the pose is well known the gates are a few pixels wide and hold
     one line; after a blind stretch they span several, and the nearest is as likely another feature of the
-    same wall, whose update would pull the pose a feature spacing off with a collapsed covariance."""
-    ids, _, d2, cost = ekf.association_costs(measured[free], pan, rest, extra)
+    same wall, whose update would pull the pose a feature spacing off with a collapsed covariance. ``gates``:
+    :meth:`JointEKF.association_costs` of the free lines and the landmarks left to the image gates."""
+    ids, _, d2, cost = gates
     row = {int(i): r for r, i in enumerate(ids)}
     col = {j: c for c, j in enumerate(free)}
     ok = (d2 <= ekf.config.gate) & np.isfinite(cost)

@@ -753,7 +753,7 @@ class JointEKF:
         return self.joint_nis(pairs, measured, pan) <= chdtri(2 * len(pairs), 1.0 - self.config.gate_probability)
 
     def associate_joint(self, measured, pan: float = 0.0, candidates: Sequence[int] | None = None,
-                        extra_cost=None) -> list[tuple[int, int]]:
+                        extra_cost=None, *, costs=None) -> list[tuple[int, int]]:
         """One-to-one association whose pairs are *jointly* compatible.
 
         All landmarks in view share the pose error, so a set of pairs that each pass the gate can still be
@@ -762,8 +762,9 @@ class JointEKF:
         distance (plus ``extra_cost``), each kept only if its landmark and measurement are still free and
         the joint NIS of the set stays inside the χ² gate of ``2n`` dof (sequential compatible nearest
         neighbour, a greedy form of joint compatibility). An infinite ``extra_cost`` forbids a pair.
+        ``costs``: :meth:`association_costs` of the same arguments, when the caller has them already.
         """
-        ids, z, d2, cost = self.association_costs(measured, pan, candidates, extra_cost)
+        ids, z, d2, cost = self.association_costs(measured, pan, candidates, extra_cost) if costs is None else costs
         order = [(r, c) for r, c in zip(*np.nonzero((d2 <= self.config.gate) & np.isfinite(cost)), strict=True)]
         order.sort(key=lambda rc: cost[rc])
         chosen: list[tuple[int, int]] = []

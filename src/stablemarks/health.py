@@ -93,7 +93,7 @@ class HealthMonitor:
         ``edges_found``: whether the frame found its walls where the map puts them, which is what clears
         ``edges_not_found`` (default: not ``edges_missing``; a frame can be neither, e.g. one wall turned)."""
         c = self.config
-        found = not edges_missing if edges_found is None else edges_found and not edges_missing
+        found = _found(edges_missing, edges_found)
         now = {"edges_not_found": edges_missing, "inconsistent": nis_high, "odometry_disagrees": disagree,
                "blind": has_landmarks and not observed}
         for k, v in now.items():
@@ -113,7 +113,7 @@ class HealthMonitor:
         will hold after :meth:`update`."""
         c = self.config.edges_frames
         if self.edges_latched:
-            found = not edges_missing if edges_found is None else edges_found and not edges_missing
+            found = _found(edges_missing, edges_found)
             return not found or self._clean + 1 < c
         return edges_missing and self.runs["edges_not_found"] + 1 >= c
 
@@ -123,3 +123,9 @@ class HealthMonitor:
         need = {"edges_not_found": c.edges_frames, "inconsistent": c.nis_frames,
                 "odometry_disagrees": c.disagree_frames, "blind": c.blind_frames}[name]
         return self.runs[name] >= need
+
+
+def _found(edges_missing: bool, edges_found: bool | None) -> bool:
+    """Whether a frame found its walls where the map puts them (what clears ``edges_not_found``): not
+    ``edges_missing``, and ``edges_found`` when given (a frame can be neither, e.g. one wall turned)."""
+    return not edges_missing if edges_found is None else edges_found and not edges_missing

@@ -234,15 +234,17 @@ def look_at_free_edges(world_map: Map, camera: StereoCamera, X, *, limits: tuple
             bearings.append(bearing)
     if not points:
         return float(np.clip(default, lo, hi))
-    order = np.argsort(bearings)
-    b = np.asarray(bearings)[order]
-    span = np.inf if view_fraction is None else 2.0 * reach * view_fraction
-    groups = [order[i:int(np.searchsorted(b, b[i] + span, side="right"))] for i in range(len(b))]
-    most = max(len(g) for g in groups)
 
     def pan_of(group) -> float:
         mid = np.mean([points[i] for i in group], axis=0) - centre
         return float(np.clip(wrap_angle(math.atan2(mid[1], mid[0]) - X[2]), lo, hi))
 
+    if view_fraction is None:
+        return pan_of(range(len(points)))
+    order = np.argsort(bearings)
+    b = np.asarray(bearings)[order]
+    span = 2.0 * reach * view_fraction
+    groups = [order[i:int(np.searchsorted(b, b[i] + span, side="right"))] for i in range(len(b))]
+    most = max(len(g) for g in groups)
     pans = [pan_of(g) for g in groups if len(g) == most]
     return min(pans, key=lambda a: abs(float(wrap_angle(a - default))))

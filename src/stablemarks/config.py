@@ -75,20 +75,18 @@ class NoiseConfig:
     pan rules of December 2026, 0.15 px was tried (``stablemarks eval``, 8–10 trials): lab 1.3 → 2.0 and hall
     2.1 → 3.1, but room 2.6 → 7.1 and office overconfident over its first 40 frames (NEES 5–11); not adopted."""
 
-    boundary_px: float | None = 2.0
+    boundary_px: float | None = 0.5
     """σ of a boundary's column when a member segment marks the edge (Sec 3.2: the boundary moved to the
-    outermost segment) [px], shared by both images, beyond the rows' spread and the line noise. None: a uniform
-    allowance over the SAD window, ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which
-    reproduces Table 1's σ). Default 2 px: at the true pose a snapped boundary sits within a few tenths of a
-    pixel, but the region's border lies 4–8 px inside the edge, so a line painted that close to the edge is
-    taken for it (the office whiteboard's landmarks came out 19–25 mm off at 4 m, 2–3 px). Measured at the true
-    pose over 60–90 frames of each built-in scenario: the median error of a snapped boundary is 0.13–0.49 px and
-    99 % lie within 1.6 px, but the office has mis-snaps of 13–23 px (0.1 m) that no Gaussian σ covers; 2 px is
-    cautious for most edges (their errors are 0.2 σ). 0.75 px was tried on all six scenarios: pose NEES closer to
-    its bounds on lab (1.3 → 1.5) and room (2.4 → 2.8), but one office trial's recovery after a blind stretch then
-    failed (ATE 0.22 m). Tried again once the head no longer looked at bare walls for 20 frames (the free-edge
-    rule of :func:`~stablemarks.motion.look_at_free_edges`), on office and hall with 8 trials each: office pose
-    NEES 3.9 → 5.9 and ATE 12 → 22 mm, hall NEES 1.7 → 2.4 and ATE 21 → 26 mm. The default stays."""
+    outermost segment) [px], shared by both images, beyond the line noise ``sigma_img`` of the segment pair it
+    was moved onto (the spread of the region's border rows no longer applies). None: a uniform allowance over
+    the SAD window, ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which reproduces Table 1's
+    σ). Measured at the true pose over 60–80 frames of three trials each of lab, room, corridor, office and hall:
+    a snapped boundary is 0.08–0.22 px RMS from the true edge and 99 % lie within 0.2–0.4 px; 0.5 px leaves room
+    for a line painted a pixel or two inside the edge. It used to be 2 px on top of the rows' spread (σ 2.7 px
+    in all, fifteen times the error): every landmark of a wall then shared a boundary error of 20 mm at 4 m,
+    which let the pose's error along the wall pass into the landmarks (lab: landmark NEES 0.2, pose NEES
+    1.3). Smaller boundary σ exposed the fitted wall's own overconfidence (corridor pose NEES 4.8), which
+    ``planes.disparity_bias_px`` now models."""
     free_boundary_px: float | None = 8.0
     """The same when no segment marks the edge and the boundary is the planar region's border itself: block
     matching moves a depth edge by about half its window, mostly inward (``calibrate-noise``: 7.4 px on the

@@ -89,13 +89,14 @@ def test_a_snapped_boundary_is_as_certain_as_its_line(hall_boundaries):
 def test_ends_found_too_far_apart_for_the_map_are_not_both_used():
     """The map fixes the distance between a wall's two ends, whatever the pose. In the corridor (first trial,
     frame 5, the localizer's pan) the second poster's far end snaps onto a line of the wall behind it, 6 cm
-    beyond the poster; the poster's own edge then passed for a feature. With line noise small enough to tell
-    (σ_img 0.06 px), the end that agrees less with the map is not used and the edge is near a boundary again."""
+    beyond the poster; the poster's own edge then passed for a feature. With boundaries known well enough to tell
+    (σ_img 0.06 px, ``boundary_px`` 0.5 px, as measured), the end that agrees less with the map is not used and
+    the edge is near a boundary again."""
     from stablemarks.evaluation import trial_seeds
 
     sc = load_scenario("corridor")
     source = SimulatedSource(simulate_run(sc, trial_seeds(sc.seed, 1)[0]))
-    cfg = Config().with_overrides({"noise": {"sigma_img": 0.06}}).with_source_defaults(source.config_defaults)
+    cfg = Config().with_overrides({"noise": {"sigma_img": 0.06, "boundary_px": 0.5}}).with_source_defaults(source.config_defaults)
     f = source.frame(5, 0.03213491023225945)
     T = np.asarray(f.true_pose)
     model = select_landmarks(run_front_end(f.left, f.right, cfg), cfg.camera(sc.camera).with_pan(f.pan), sc.map,

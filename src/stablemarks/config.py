@@ -75,18 +75,18 @@ class NoiseConfig:
     pan rules of December 2026, 0.15 px was tried (``stablemarks eval``, 8–10 trials): lab 1.3 → 2.0 and hall
     2.1 → 3.1, but room 2.6 → 7.1 and office overconfident over its first 40 frames (NEES 5–11); not adopted."""
 
-    boundary_px: float | None = 0.5
+    boundary_px: float | None = 2.0
     """σ of a boundary's column when a member segment marks the edge (Sec 3.2: the boundary moved to the
     outermost segment) [px], shared by both images, beyond the line noise ``sigma_img`` of the segment pair it
-    was moved onto (the spread of the region's border rows no longer applies). None: a uniform allowance over
-    the SAD window, ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which reproduces Table 1's
-    σ). Measured at the true pose over 60–80 frames of three trials each of lab, room, corridor, office and hall:
-    a snapped boundary is 0.08–0.22 px RMS from the true edge and 99 % lie within 0.2–0.4 px; 0.5 px leaves room
-    for a line painted a pixel or two inside the edge. It used to be 2 px on top of the rows' spread (σ 2.7 px
-    in all, fifteen times the error): every landmark of a wall then shared a boundary error of 20 mm at 4 m,
-    which let the pose's error along the wall pass into the landmarks (lab: landmark NEES 0.2, pose NEES
-    1.3). Smaller boundary σ exposed the fitted wall's own overconfidence (corridor pose NEES 4.8), which
-    ``planes.disparity_bias_px`` now models."""
+    was moved onto (the spread of the region's border rows, which it replaced, no longer counts: it held a
+    snapped boundary at 2.7 px instead of 2.0). None: a uniform allowance over the SAD window,
+    ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which reproduces Table 1's σ). Measured at
+    the true pose over 60–80 frames of three trials each of lab, room, corridor, office and hall: a snapped
+    boundary is 0.08–0.22 px RMS from the true edge and 99 % lie within 0.2–0.4 px, but a few snap onto a line
+    painted near the edge, 2–3 px off (the hall's screens at 9 m: 8 cm along the wall). No Gaussian σ covers
+    both: 0.5 px brought the lab's and room's ATE down by a quarter but let those few through as confident
+    landmarks (office, 20 trials: three with pose NEES peaks of 225–954); 0.2 px more so. 2 px stays until
+    such snaps can be told from the edge."""
     free_boundary_px: float | None = 8.0
     """The same when no segment marks the edge and the boundary is the planar region's border itself: block
     matching moves a depth edge by about half its window, mostly inward (``calibrate-noise``: 7.4 px on the

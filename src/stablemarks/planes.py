@@ -57,14 +57,17 @@ class PlaneConfig:
     member_dilate_px: int = 3
     """The region is dilated by this much before the membership test (edges sit at region borders)."""
 
-    disparity_bias_px: float = 0.03
-    """σ of a disparity error shared by every pixel of one wall [px]. Sub-pixel block matching is biased towards
-    whole disparities (pixel locking), and a wall seen nearly frontally has about the same fractional disparity
-    everywhere, so its pixels share that bias and averaging them does not remove it. Measured at the true pose
-    on the simulator's walls, as the disparity that the fitted wall's offset error amounts to (RMS): 0.021 px on
-    lab, 0.034 on room, 0.023 on hall, 0.03 on corridor (0.06 with its clutter), 0.064 on office; without this
-    term the fitted offset was held 1.3–7 times too certain (in variance). 0.05 px made the filter cautious
-    everywhere (pose NEES 0.6 on lab, 1.05 on corridor). 0: none."""
+    disparity_bias_px: float = 0.0
+    """σ of a disparity error shared by every pixel of one wall [px], added to the fitted line's covariance.
+    Sub-pixel block matching is biased towards whole disparities (pixel locking), and a wall seen nearly
+    frontally has about the same fractional disparity everywhere, so its pixels share that bias and averaging
+    them does not remove it. Measured at the true pose on the simulator's walls, as the disparity that the
+    fitted wall's offset error amounts to (RMS): 0.021 px on lab, 0.034 on room, 0.023 on hall, 0.03 on
+    corridor, 0.064 on office; without it the fitted offset is held 1.3–7 times too certain (in variance), and
+    0.03 px makes it consistent. Default 0 all the same: with 0.03 px the whole filter became more cautious
+    (pose NEES on lab 1.3 → 0.8, room 2.6 → 1.0, 20 trials), because the landmarks that the fit feeds are
+    already held less certain than their errors (by the boundary's σ, ``noise.boundary_px``). Set it when the
+    fitted walls themselves are used, or once the boundary's σ can be measured smaller."""
 
     def sigma_nu(self, camera: StereoCamera) -> float:
         return float(self.disparity_noise_px) if self.disparity_noise_px else float(np.sqrt(2.0) * camera.sigma_img)
@@ -394,13 +397,13 @@ def fit_plane(
         a, b = (float(v) for v in N_inv @ np.array([wgt @ o_in, w_ds @ o_in]))
     res = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
     chi2_dof = float(res @ res) / max(1, int(np.count_nonzero(inl)) - 2)
-    # The noise is the data's own spread (chi2_dof, below 1 when the disparity is better than σ_ν), and one
-    # independent measurement per SAD window of the full band: a pixel's disparity shares its window's support
-    # along the row and down the column, so the residuals are correlated over `correlation_px` both ways
-    # (measured on the simulator's walls: 13–14 px either way with 15 px windows). Counting one measurement
-    # per window width along a row only, with σ_ν as a floor, left the fitted line 1.3–7.5 times more certain
-    # (in variance) than its error at the true pose. The subsample carries len(s)/n of the band's information.
-    cov_R = N_inv * chi2_dof * config.correlation_px**2 * len(s) / n
+    # one independent measurement per `correlation_px` pixels of the full band (the subsample carries
+    # len(s)/n of its information). The residuals are correlated down the column as well (13–14 px either way
+    # with 15 px windows, measured on the simulator's walls); counting one measurement per window area, with
+    # the residuals' own spread, was tried (December 2026) and made the whole filter more cautious, not more
+    # consistent (room's pose NEES 2.6 → 1.5 over 20 trials): the landmarks it feeds are already held less
+    # certain than their errors, by the boundary's σ. Not adopted.
+    cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
     if config.disparity_bias_px > 0:
         # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,
         # o − c_o), Z the pixel's depth; the line (a, b) follows through the weighted least squares

@@ -74,18 +74,6 @@ def test_a_free_boundary_keeps_the_disparity_of_its_wall():
     assert checked >= 2
 
 
-def test_a_snapped_boundary_is_as_certain_as_its_line(hall_boundaries):
-    """Moved onto a segment pair, the boundary's columns are that pair's lines: the line noise and
-    ``noise.boundary_px`` (is the line the edge?), not the spread of the region's border rows it replaced
-    (which held snapped boundaries 15–20 times less certain than their errors, 0.1–0.2 px RMS)."""
-    cfg = Config()
-    expected = np.hypot(cfg.noise.sigma_img, cfg.noise.boundary_px)
-    snapped = [b for _, b, _, _ in hall_boundaries if b.snapped]
-    assert snapped
-    for b in snapped:
-        np.testing.assert_allclose(b.sigma_u, expected, rtol=1e-9)
-
-
 def test_ends_found_too_far_apart_for_the_map_are_not_both_used():
     """The map fixes the distance between a wall's two ends, whatever the pose. In the corridor (first trial,
     frame 5, the localizer's pan) the second poster's far end snaps onto a line of the wall behind it, 6 cm

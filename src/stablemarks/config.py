@@ -77,16 +77,25 @@ class NoiseConfig:
 
     boundary_px: float | None = 2.0
     """σ of a boundary's column when a member segment marks the edge (Sec 3.2: the boundary moved to the
-    outermost segment) [px], shared by both images, beyond the line noise ``sigma_img`` of the segment pair it
-    was moved onto (the spread of the region's border rows, which it replaced, no longer counts: it held a
-    snapped boundary at 2.7 px instead of 2.0). None: a uniform allowance over the SAD window,
-    ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which reproduces Table 1's σ). Measured at
-    the true pose over 60–80 frames of three trials each of lab, room, corridor, office and hall: a snapped
-    boundary is 0.08–0.22 px RMS from the true edge and 99 % lie within 0.2–0.4 px, but a few snap onto a line
-    painted near the edge, 2–3 px off (the hall's screens at 9 m: 8 cm along the wall). No Gaussian σ covers
-    both: 0.5 px brought the lab's and room's ATE down by a quarter but let those few through as confident
-    landmarks (office, 20 trials: three with pose NEES peaks of 225–954); 0.2 px more so. 2 px stays until
-    such snaps can be told from the edge."""
+    outermost segment) [px], shared by both images, beyond the rows' spread and the line noise. None: a uniform
+    allowance over the SAD window, ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which
+    reproduces Table 1's σ). Default 2 px: at the true pose a snapped boundary sits within a few tenths of a
+    pixel, but the region's border lies 4–8 px inside the edge, so a line painted that close to the edge is
+    taken for it (the office whiteboard's landmarks came out 19–25 mm off at 4 m, 2–3 px). Measured at the true
+    pose over 60–90 frames of each built-in scenario: the median error of a snapped boundary is 0.13–0.49 px and
+    99 % lie within 1.6 px, but the office has mis-snaps of 13–23 px (0.1 m) that no Gaussian σ covers; 2 px is
+    cautious for most edges (their errors are 0.2 σ). 0.75 px was tried on all six scenarios: pose NEES closer to
+    its bounds on lab (1.3 → 1.5) and room (2.4 → 2.8), but one office trial's recovery after a blind stretch then
+    failed (ATE 0.22 m). Tried again once the head no longer looked at bare walls for 20 frames (the free-edge
+    rule of :func:`~stablemarks.motion.look_at_free_edges`), on office and hall with 8 trials each: office pose
+    NEES 3.9 → 5.9 and ATE 12 → 22 mm, hall NEES 1.7 → 2.4 and ATE 21 → 26 mm. The default stays. Measured again
+    in December 2026 (true pose, 3 trials × 60–80 frames of lab, room, corridor, office, hall): snapped boundaries
+    are 0.08–0.22 px RMS from the edge (99 % within 0.4 px) while their modelled σ, this plus the spread of the
+    region's border rows they replaced, is 2.7 px; but a few snap onto a line 2–3 px inside the edge (the
+    hall's screens at 9 m: 8 cm). Taking only the line noise plus this σ (2.0 px in all) met the room's goal
+    (pose NEES 3.1, 96 % of frames inside, 20 trials) but left the corridor overconfident over frames 5–20 (NEES
+    5–8: the fitted walls' own σ, 1.3–7 times too small, see ``planes.disparity_bias_px``, then shows); with
+    0.5 px and that bias modelled, office trials peaked at NEES 225–954 on such snaps. Not adopted."""
     free_boundary_px: float | None = 8.0
     """The same when no segment marks the edge and the boundary is the planar region's border itself: block
     matching moves a depth edge by about half its window, mostly inward (``calibrate-noise``: 7.4 px on the

@@ -72,3 +72,31 @@ def test_a_free_boundary_keeps_the_disparity_of_its_wall():
                 assert abs((b.u[0] - b.u[1]) - d_plane) <= w / 2.0 + 1e-9, (k, b.plane_id, b.edge, b.u, d_plane)
                 checked += b.plane_id == "south-a"
     assert checked >= 2
+
+
+def test_ends_found_too_far_apart_for_the_map_are_not_both_used():
+    """The map fixes the distance between a wall's two ends, whatever the pose. In the corridor (first trial,
+    frame 5, the localizer's pan) the second poster's far end snaps onto a line of the wall behind it, 6 cm
+    beyond the poster; the poster's own edge then passed for a feature. With boundaries known well enough to tell
+    (σ_img 0.06 px, ``boundary_px`` 0.5 px, as measured), the end that agrees less with the map is not used and
+    the edge is near a boundary again."""
+    from stablemarks.evaluation import trial_seeds
+
+    sc = load_scenario("corridor")
+    source = SimulatedSource(simulate_run(sc, trial_seeds(sc.seed, 1)[0]))
+    cfg = Config().with_overrides({"noise": {"sigma_img": 0.06, "boundary_px": 0.5}}).with_source_defaults(source.config_defaults)
+    f = source.frame(5, 0.03213491023225945)
+    T = np.asarray(f.true_pose)
+    model = select_landmarks(run_front_end(f.left, f.right, cfg), cfg.camera(sc.camera).with_pan(f.pan), sc.map,
+                             T, np.diag([0.02, 0.02, 0.005]) ** 2, cfg)
+    fired = 0
+    for pm in model.planes:
+        fired += sum("both ends" in why for _, why in pm.rejected_boundaries)
+        if len(pm.boundaries) == 2:
+            b1, b2 = pm.boundaries
+            length = abs(float((b1.P - b2.P) @ pm.fit.plane.direction))
+            assert abs(length - pm.fit.plane.length) <= 3 * np.hypot(b1.sigma_along, b2.sigma_along)
+        for c in pm.candidates:
+            if c.selected:  # no selected line within 2 cm of a mapped end
+                assert 0.02 < c.s < pm.fit.plane.length - 0.02, (pm.fit.plane.id, c.s)
+    assert fired >= 1

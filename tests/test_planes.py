@@ -149,3 +149,64 @@ def test_config_is_immutable():
     cfg = PlaneConfig()
     with pytest.raises(AttributeError):
         cfg.gate_sigma = 2.0
+
+
+@pytest.mark.parametrize("wall", [PARTITION, ReferencePlane("angled", (-1.0, 3.0), (1.5, 5.0), z=(0.0, 2.0))])
+def test_shared_disparity_bias_jacobian_matches_finite_differences(wall):
+    """The fitted line's covariance holds a disparity error shared by the whole wall (pixel locking):
+    ``σ_β² J Jᵀ`` with ``J = ∂(a, b)/∂β``. Adding β to every pixel and fitting again gives ``J`` numerically."""
+    disp = synthetic_disparity(CAM, X0, [wall], noise=0.05, rng=np.random.default_rng(7))
+    pred = predict_plane(CAM, X0, COV0, wall)
+    sigma = 0.05
+    with_bias = fit_plane(CAM, X0, disp, pred, PlaneConfig(disparity_bias_px=sigma))
+    without = fit_plane(CAM, X0, disp, pred, PlaneConfig(disparity_bias_px=0.0))
+    assert with_bias and without
+    np.testing.assert_array_equal(with_bias.region, without.region)
+    added = (with_bias.cov_R - without.cov_R) / sigma**2
+    assert_psd(with_bias.cov_R)
+    h = 1e-3
+    up = fit_plane(CAM, X0, disp + np.float32(h), pred, PlaneConfig(disparity_bias_px=0.0))
+    down = fit_plane(CAM, X0, disp - np.float32(h), pred, PlaneConfig(disparity_bias_px=0.0))
+    J = (np.array([up.a, up.b]) - np.array([down.a, down.b])) / (2 * h)
+    # J from the added covariance (rank 1), with the numerical one's sign
+    J_a = np.copysign(np.sqrt(added[0, 0]), J[0])
+    J_b = added[0, 1] / J_a
+    assert added[0, 0] * added[1, 1] - added[0, 1] ** 2 == pytest.approx(0.0, abs=1e-9 * added[0, 0])
+    assert J_a == pytest.approx(J[0], rel=0.02)
+    # the slope moves by little (the pixels' weights and their mean along the wall also move, second order)
+    assert abs(J_b - J[1]) <= 0.02 * abs(J[0]) / wall.length
+    # a wall 4 m away moves by about Z²/(f b) per pixel of disparity
+    assert abs(J[0]) > 0.5 * 4.0**2 / (CAM.f * CAM.baseline)
+
+
+@pytest.mark.slow
+def test_the_fitted_wall_is_as_uncertain_as_its_error_on_rendered_frames():
+    """With ``planes.disparity_bias_px`` at its measured 0.03 px, the fitted wall's offset at the true pose lies
+    within its σ on the simulator's images: normalised squared errors average ≤ 2 (without it: 5.5 on these
+    frames; the walls 3–9 m away share a bias of 0.02–0.06 px of disparity)."""
+    from dataclasses import replace
+
+    from stablemarks.config import Config
+    from stablemarks.pipeline import run_front_end
+    from stablemarks.sim.run import simulate_run
+    from stablemarks.sim.scenario import load_scenario
+    from stablemarks.sim.source import SimulatedSource
+
+    z2 = []
+    for name in ("office", "corridor"):
+        sc = load_scenario(name)
+        source = SimulatedSource(simulate_run(sc), frames=40)
+        cfg = Config().with_source_defaults(source.config_defaults)
+        for k, f in enumerate(source):
+            if k % 6:
+                continue
+            T = np.asarray(f.true_pose)
+            cam = source.camera.with_pan(f.pan)
+            disp = run_front_end(f.left, f.right, cfg).disparity.left
+            for pred in predict_planes(cam, T, np.diag([0.02, 0.02, np.radians(0.5)]) ** 2, source.world_map,
+                                       cfg.planes):
+                fit = fit_plane(cam, T, disp, pred, replace(cfg.planes, disparity_bias_px=0.03))
+                if fit and abs(fit.a) < 0.1:  # the wall itself, not clutter fitted in its band
+                    z2.append(fit.a**2 / fit.cov_R[0, 0])
+    assert len(z2) >= 10
+    assert np.mean(z2) <= 2.0, np.round(z2, 1)

@@ -121,7 +121,9 @@ class LandmarkConfig:
     obliquely (:meth:`~stablemarks.estimation.JointEKF.visible`)."""
     boundary_gate_sigma: float = 3.0
     """A found boundary farther along the wall from the map's free edge than this many σ (its own σ and the
-    pose's, projected on the wall) disagrees with the map: nothing is modelled from it in that frame."""
+    pose's, projected on the wall) disagrees with the map: nothing is modelled from it in that frame. The same
+    gate holds the distance between a wall's two ends, when both are found, to the map's length (their own σ
+    only: it does not depend on the pose); beyond it the end that agrees less with the map is not used."""
     fit_gate_chi2: float = 13.8
     """A fitted wall line ``(a, b)`` (offset and slope from the map's wall, seen through the belief) must agree
     with the map given the pose covariance, the fit's own and the map's (:attr:`Map.accuracy`, e.g. of walls
@@ -647,6 +649,13 @@ def select(candidates: list[Candidate], boundaries: list[Boundary], config: Land
     out = []
     for c in candidates:
         reason = on_wall_reason(c, config, z_range)
+        # the feature where its relative model puts it (``s`` from the boundary it was modelled from): the
+        # distance to the wall's other end is then measured the same way as to this one (a wall's far end placed
+        # from the map's length is exactly ``length − s`` away; the triangulated point alone is off along the
+        # wall by its depth error at an angle, 3 cm at 6 m and 15°, enough to take a poster's far edge for a
+        # feature once the boundaries are known to a few mm)
+        ref = next((b for b in boundaries if b.plane_id == c.plane_id and b.edge == c.edge), None)
+        P_c = ref.P + c.s * ref.inward if ref is not None else c.P_observed
         for b in boundaries:
             if reason:
                 break
@@ -654,8 +663,8 @@ def select(candidates: list[Candidate], boundaries: list[Boundary], config: Land
                 continue
             if b.edge == c.edge:
                 dist = c.s
-            else:  # the wall's other free edge, also in view: distance inward from it
-                dist = float((c.P_observed - b.P) @ b.inward)
+            else:  # the wall's other end, found in view or placed from the map: distance inward from it
+                dist = float((P_c - b.P) @ b.inward)
             sigma_b = b.sigma_along
             if config.boundary_rule == "combined":
                 margin = config.boundary_sigma * np.hypot(sigma_b, c.sigma_f)
@@ -805,6 +814,25 @@ def landmarks_on_plane(
                                     f"along the wall from the map's free edge (σ {100 * sigma:.1f} cm): not used"))
                 continue
         boundaries.append(b)
+    if len(boundaries) == 2:
+        # Both ends found: the map fixes their distance, whatever the pose. One end snapped onto a line beyond
+        # the wall (the corridor: a poster's far edge found 6 cm out, on a line of the wall behind it, so that
+        # the poster's own edge passed for a feature) makes it disagree; the end that agrees less with the map
+        # through the pose is not used.
+        b1, b2 = boundaries
+        length = abs(float((b1.P - b2.P) @ fit.plane.direction))
+        sigma = float(np.hypot(b1.sigma_along, b2.sigma_along))
+        if abs(length - fit.plane.length) > config.boundary_gate_sigma * sigma:
+            def score(b):
+                if cov_X is None:
+                    return b.sigma_along
+                off, sig = boundary_disagreement(b, fit.plane, fit.X, cov_X)
+                return abs(off) / sig
+            worse = max(boundaries, key=score)
+            boundaries.remove(worse)
+            rejected.append((worse, f"plane {fit.plane.label!r}: the boundaries found at both ends are "
+                                    f"{100 * length:.1f} cm apart, the map's wall {100 * fit.plane.length:.1f} cm "
+                                    f"(σ {100 * sigma:.1f} cm): the one at {worse.edge} is not used"))
     if not boundaries:
         return PlaneLandmarks(fit, [], members, [], rejected, searched)
     ref = min(boundaries, key=lambda b: b.sigma_along)

@@ -84,7 +84,8 @@ def test_ends_found_too_far_apart_for_the_map_are_not_both_used():
 
     sc = load_scenario("corridor")
     source = SimulatedSource(simulate_run(sc, trial_seeds(sc.seed, 1)[0]))
-    cfg = Config().with_overrides({"noise": {"sigma_img": 0.06, "boundary_px": 0.5}}).with_source_defaults(source.config_defaults)
+    cfg = Config().with_overrides({"noise": {"sigma_img": 0.06, "boundary_px": 0.5}})
+    cfg = cfg.with_source_defaults(source.config_defaults)
     f = source.frame(5, 0.03213491023225945)
     T = np.asarray(f.true_pose)
     model = select_landmarks(run_front_end(f.left, f.right, cfg), cfg.camera(sc.camera).with_pan(f.pan), sc.map,

@@ -48,8 +48,8 @@ class PlaneConfig:
     from the line are not on the wall."""
     correlation_px: float = 15.0
     """Neighbouring disparity pixels are not independent: a window of this size [px] shares its SAD
-    support (the block size) along the row and down the column, so the fitted line counts one independent
-    measurement per ``correlation_px²`` pixels of its band, each with the residuals' own spread."""
+    support (the block size), so the fitted line's covariance is inflated by ``correlation_px`` (one
+    independent measurement per window width along a row)."""
     row_margin_px: float = 4.0
     """Rows this far outside the wall's predicted top/bottom still count."""
     member_min_fraction: float = 0.5
@@ -64,10 +64,12 @@ class PlaneConfig:
     them does not remove it. Measured at the true pose on the simulator's walls, as the disparity that the
     fitted wall's offset error amounts to (RMS): 0.021 px on lab, 0.034 on room, 0.023 on hall, 0.03 on
     corridor, 0.064 on office; without it the fitted offset is held 1.3–7 times too certain (in variance), and
-    0.03 px makes it consistent. Default 0 all the same: with 0.03 px the whole filter became more cautious
-    (pose NEES on lab 1.3 → 0.8, room 2.6 → 1.0, 20 trials), because the landmarks that the fit feeds are
-    already held less certain than their errors (by the boundary's σ, ``noise.boundary_px``). Set it when the
-    fitted walls themselves are used, or once the boundary's σ can be measured smaller."""
+    0.03 px makes it consistent. Default 0 all the same: tried with 0.03 px (December 2026, together with a
+    snapped boundary's σ of 0.5 px from its line and the window's correlation counted down the column too), the
+    whole filter became more cautious, not more consistent (pose NEES on lab 1.3 → 0.8, room 2.6 → 1.0, 20
+    trials), because the landmarks the fit feeds are already held less certain than their errors (by the
+    boundary's σ, ``noise.boundary_px``), and the office then had three trials with NEES peaks of 225–954. Set it
+    when the fitted walls themselves are used, or once the boundary's σ can be measured smaller."""
 
     def sigma_nu(self, camera: StereoCamera) -> float:
         return float(self.disparity_noise_px) if self.disparity_noise_px else float(np.sqrt(2.0) * camera.sigma_img)
@@ -400,9 +402,9 @@ def fit_plane(
     # one independent measurement per `correlation_px` pixels of the full band (the subsample carries
     # len(s)/n of its information). The residuals are correlated down the column as well (13–14 px either way
     # with 15 px windows, measured on the simulator's walls); counting one measurement per window area, with
-    # the residuals' own spread, was tried (December 2026) and made the whole filter more cautious, not more
-    # consistent (room's pose NEES 2.6 → 1.5 over 20 trials): the landmarks it feeds are already held less
-    # certain than their errors, by the boundary's σ. Not adopted.
+    # the residuals' own spread, was tried (December 2026, with the snapped boundary's σ taken from its line)
+    # and made the whole filter more cautious, not more consistent (room's pose NEES 3.1 → 1.5, 20 trials): the
+    # landmarks it feeds are already held less certain than their errors, by the boundary's σ. Not adopted.
     cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
     if config.disparity_bias_px > 0:
         # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,

@@ -93,9 +93,10 @@ class NoiseConfig:
     are 0.08–0.22 px RMS from the edge (99 % within 0.4 px) while their modelled σ, this plus the spread of the
     region's border rows they replaced, is 2.7 px; but a few snap onto a line 2–3 px inside the edge (the
     hall's screens at 9 m: 8 cm). Taking only the line noise plus this σ (2.0 px in all) met the room's goal
-    (pose NEES 3.1, 96 % of frames inside, 20 trials) but left the corridor overconfident over frames 5–20 (NEES
-    5–8: the fitted walls' own σ, 1.3–7 times too small, see ``planes.disparity_bias_px``, then shows); with
-    0.5 px and that bias modelled, office trials peaked at NEES 225–954 on such snaps. Not adopted."""
+    (pose NEES 3.1, 96 % of frames inside, 20 trials) but left the corridor overconfident over frames 5–20
+    (NEES 5–8: the fitted walls' own variance, 2–8 times too small, see ``planes.disparity_bias_px``, then
+    shows); with 0.5 px and that bias modelled, office trials peaked at NEES 225–954 on such snaps. Not
+    adopted."""
     free_boundary_px: float | None = 8.0
     """The same when no segment marks the edge and the boundary is the planar region's border itself: block
     matching moves a depth edge by about half its window, mostly inward (``calibrate-noise``: 7.4 px on the

@@ -61,10 +61,11 @@ class PlaneConfig:
     """σ of a disparity error shared by every pixel of one wall [px], added to the fitted line's covariance.
     Sub-pixel block matching is biased towards whole disparities (pixel locking), and a wall seen nearly
     frontally has about the same fractional disparity everywhere, so its pixels share that bias and averaging
-    them does not remove it. Measured at the true pose on the simulator's walls, as the disparity that the
-    fitted wall's offset error amounts to (RMS): 0.021 px on lab, 0.034 on room, 0.023 on hall, 0.03 on
-    corridor, 0.064 on office; without it the fitted offset is held 1.3–7 times too certain (in variance), and
-    0.03 px makes it consistent. Default 0 all the same: tried with 0.03 px (December 2026, together with a
+    them does not remove it. Measured at the true pose on the simulator's walls as the disparity that the fitted
+    wall's offset error amounts to, RMS (``python benchmarks/noise_at_true_pose.py lab room corridor office
+    hall``): 0.021 px on lab, 0.034 on room, 0.059 on corridor, 0.064 on office, 0.023 on hall. Without it the
+    fitted offset is held 2–8 times too certain (median of the normalised squared errors; mean 5–29); with
+    0.03 px the mean is 0.4–2.2. Default 0 all the same: tried with 0.03 px (December 2026, together with a
     snapped boundary's σ of 0.5 px from its line and the window's correlation counted down the column too), the
     whole filter became more cautious, not more consistent (pose NEES on lab 1.3 → 0.8, room 2.6 → 1.0, 20
     trials), because the landmarks the fit feeds are already held less certain than their errors (by the

@@ -21,13 +21,12 @@ import numpy as np
 
 from stablemarks.config import Config
 from stablemarks.evaluation import trial_seeds
+from stablemarks.noisefit import SEARCH_POSE_COV
 from stablemarks.pipeline import run_front_end, select_landmarks
 from stablemarks.planes import fit_plane, predict_planes
 from stablemarks.sim.run import simulate_run
 from stablemarks.sim.scenario import load_scenario
 from stablemarks.sim.source import SimulatedSource
-
-SEARCH_COV = np.diag([0.02, 0.02, np.radians(0.5)]) ** 2
 
 
 def measure(name: str, frames: int, every: int, bias: float, config: Config) -> None:
@@ -44,13 +43,13 @@ def measure(name: str, frames: int, every: int, bias: float, config: Config) -> 
         T = np.asarray(f.true_pose)
         cam = cfg.camera(source.camera).with_pan(f.pan)
         front = run_front_end(f.left, f.right, cfg)
-        model = select_landmarks(front, cam, source.world_map, T, SEARCH_COV, cfg)
+        model = select_landmarks(front, cam, source.world_map, T, SEARCH_POSE_COV, cfg)
         for pm in model.planes:
             for b in pm.boundaries:
                 true_u = cam.project_columns(T, pm.fit.plane.edge(b.edge))
                 bnd[bool(b.snapped)].append((b.u[0] - true_u[0], b.sigma_u[0]))
         fb = cam.f * cam.baseline
-        for pred in predict_planes(cam, T, SEARCH_COV, source.world_map, cfg.planes):
+        for pred in predict_planes(cam, T, SEARCH_POSE_COV, source.world_map, cfg.planes):
             fits = [fit_plane(cam, T, front.disparity.left, pred, pc) for pc in (cfg.planes, with_bias)]
             if not fits[0] or not fits[1] or abs(fits[0].a) > 0.1:  # another surface fitted in the band
                 continue

@@ -137,7 +137,13 @@ class LandmarkConfig:
     wall's band (:func:`beside_nearer`): its left line may be the nearer object's edge, matched with a line of
     the wall in the other image (the corridor: a poster board's edge, 0.7 px from a line of the poster behind
     it, taken for it), or a line of the wall that the nearer object half hides. Such a line is rejected ("beside
-    something nearer"); a T-junction is not a stable landmark. 1 keeps every line."""
+    something nearer"); a T-junction is not a stable landmark. The same reason rejects a line within
+    ``boundary_sigma`` σ (the pose's, through Eq 3, and the line noise) of a column where the end of another wall
+    of the map is seen against this one while standing too little in front of it for the disparity to show
+    (:func:`nearer_silhouettes`: the hall's screens 1 m in front of its walls at 10 m, 0.6 px). Measured with
+    ``stablemarks eval`` (20 trials, December 2026): corridor selection precision 0.91 → 1.00 (pose NEES 1.8 →
+    2.8), hall 0.90 → 0.97 (recall 0.74 → 0.73); lab, room and office as before within a trial's difference.
+    1 turns both tests off."""
     min_edge_step_sigma: float = 3.0
     """A free edge is searched only where the map puts something at a different depth just beyond it: the
     disparity step the map predicts across the edge must reach this many σ of the disparity noise

@@ -620,7 +620,8 @@ def select_landmarks(
         model = landmarks_on_plane(camera, fit, pairs, front.left_segments, front.disparity.right,
                                    config.landmarks, config.planes, float(config.sad.block_size),
                                    columns, world_map, cov_X=cov_X,
-                                   border_sigma_px=(config.noise.boundary_px, config.noise.free_boundary_px))
+                                   border_sigma_px=(config.noise.boundary_px, config.noise.free_boundary_px),
+                                   disparity_left=front.disparity.left)
         warnings += [why for _, why in model.rejected_boundaries]
         t_model += time.perf_counter() - tb
         if fit.plane.free_edges and not model.boundaries:

@@ -103,34 +103,48 @@ def test_ends_found_too_far_apart_for_the_map_are_not_both_used():
     assert fired >= 1
 
 
-def test_a_line_at_the_silhouette_of_a_nearer_wall_is_not_a_landmark():
-    """Corridor, first trial, frame 16: the first poster board's free edge, 4.4 m away, stands in front of the
-    second board (8.9 m). Its left line, 0.1 px from where the map puts the silhouette, was matched with a line of
-    the second board in the right image; the pair had the board's disparity and was entered as a feature of it
-    (no true feature there). With something nearer than the wall on one side of the line, it is rejected."""
-    from stablemarks.evaluation import _match_truth, trial_seeds
-    from stablemarks.landmarks import REASON_BESIDE_NEARER
+def _with_and_without_the_silhouette_rule(name: str, k: int, pan: float, wall: str, occluder: str, end: str):
+    """Frame ``k`` of ``name``'s first trial at the true pose, modelled with the silhouette rule (default) and
+    without it: ``{nearer_fraction: (frame, the candidates on wall, the one within 1 px of the column where
+    occluder's end is seen)}``."""
+    from stablemarks.evaluation import trial_seeds
 
-    sc = load_scenario("corridor")
+    sc = load_scenario(name)
     source = SimulatedSource(simulate_run(sc, trial_seeds(sc.seed, 1)[0]))
-    f = source.frame(16, 0.0785993762118693)
+    f = source.frame(k, pan)
     T = np.asarray(f.true_pose)
     front = None
-    by_rule = {}
+    out = {}
     for fraction in (0.5, 1.0):
         cfg = Config().with_overrides({"landmarks": {"nearer_fraction": fraction}})
         cfg = cfg.with_source_defaults(source.config_defaults)
         cam = cfg.camera(sc.camera).with_pan(f.pan)
         front = front or run_front_end(f.left, f.right, cfg)
         model = select_landmarks(front, cam, sc.map, T, np.diag([0.02, 0.02, 0.005]) ** 2, cfg)
-        silhouette = float(cam.project_columns(T, sc.map["poster-1"].edge("p1"))[0])
-        at = [c for c in model.candidates if c.plane_id == "poster-2" and abs(c.u_left - silhouette) < 1.0]
+        silhouette = float(cam.project_columns(T, sc.map[occluder].edge(end))[0])
+        on_wall = [c for c in model.candidates if c.plane_id == wall]
+        at = [c for c in on_wall if abs(c.u_left - silhouette) < 1.0]
         assert len(at) == 1
-        by_rule[fraction] = at[0]
-        assert any(c.selected for c in model.candidates if c.plane_id == "poster-2")  # the board's own features
-    assert _match_truth(f.truth, by_rule[1.0]) is None  # no true feature: the pair mixes two edges
-    assert by_rule[1.0].selected  # what happened without the rule
-    assert not by_rule[0.5].selected and by_rule[0.5].reason == REASON_BESIDE_NEARER
+        out[fraction] = (f, on_wall, at[0])
+    return out
+
+
+def test_a_line_at_the_silhouette_of_a_nearer_wall_is_not_a_landmark():
+    """Corridor, first trial, frame 16: the first poster board's free edge, 4.4 m away, stands in front of the
+    second board (8.9 m). Its left line, 0.1 px from where the map puts the silhouette, was matched with a line of
+    the second board in the right image; the pair had the board's disparity and was entered as a feature of it
+    (no true feature there). With something nearer than the wall on one side of the line, it is rejected."""
+    from stablemarks.evaluation import _match_truth
+    from stablemarks.landmarks import REASON_BESIDE_NEARER
+
+    by_rule = _with_and_without_the_silhouette_rule("corridor", 16, 0.0785993762118693, "poster-2", "poster-1", "p1")
+    for _, on_wall, _ in by_rule.values():
+        assert any(c.selected for c in on_wall)  # the board's own features
+    f, _, mixed = by_rule[1.0]
+    assert _match_truth(f.truth, mixed) is None  # no true feature: the pair mixes two edges
+    assert mixed.selected  # what happened without the rule
+    _, _, c = by_rule[0.5]
+    assert not c.selected and c.reason == REASON_BESIDE_NEARER
 
 
 def test_a_line_at_the_silhouette_of_a_thin_step_in_the_map_is_not_a_landmark():
@@ -138,27 +152,14 @@ def test_a_line_at_the_silhouette_of_a_thin_step_in_the_map_is_not_a_landmark():
     line 0.85 m in front of the wall, 2.7σ (the off-wall test does not resolve it) and 0.6 px of disparity (nor
     does the disparity beside it); it was entered as a feature of the wall. The map knows the screen: a line where
     a nearer wall's end is seen against this one, within 3σ of the pose's column uncertainty, is rejected."""
-    from stablemarks.evaluation import _match_truth, trial_seeds
+    from stablemarks.evaluation import _match_truth
     from stablemarks.landmarks import REASON_BESIDE_NEARER
 
-    sc = load_scenario("hall")
-    source = SimulatedSource(simulate_run(sc, trial_seeds(sc.seed, 1)[0]))
-    f = source.frame(20, 2.046810728987044)
-    T = np.asarray(f.true_pose)
-    front = None
-    by_rule = {}
-    for fraction in (0.5, 1.0):
-        cfg = Config().with_overrides({"landmarks": {"nearer_fraction": fraction}})
-        cfg = cfg.with_source_defaults(source.config_defaults)
-        cam = cfg.camera(sc.camera).with_pan(f.pan)
-        front = front or run_front_end(f.left, f.right, cfg)
-        model = select_landmarks(front, cam, sc.map, T, np.diag([0.02, 0.02, 0.005]) ** 2, cfg)
-        silhouette = float(cam.project_columns(T, sc.map["screen-n"].edge("p1"))[0])
-        on_wall = [c for c in model.candidates if c.plane_id == "north-b"]
-        at = [c for c in on_wall if abs(c.u_left - silhouette) < 1.0]
-        assert len(at) == 1
-        by_rule[fraction] = at[0]
+    by_rule = _with_and_without_the_silhouette_rule("hall", 20, 2.046810728987044, "north-b", "screen-n", "p1")
+    for f, on_wall, _ in by_rule.values():
         assert any(c.selected and _match_truth(f.truth, c) == "nb-1" for c in on_wall)  # a true one stays
-    assert _match_truth(f.truth, by_rule[1.0]) is None
-    assert by_rule[1.0].selected
-    assert not by_rule[0.5].selected and by_rule[0.5].reason == REASON_BESIDE_NEARER
+    f, _, screen = by_rule[1.0]
+    assert _match_truth(f.truth, screen) is None
+    assert screen.selected
+    _, _, c = by_rule[0.5]
+    assert not c.selected and c.reason == REASON_BESIDE_NEARER

@@ -864,7 +864,7 @@ def landmarks_on_plane(
         cands = [_replace(c, selected=False, reason=REASON_BESIDE_NEARER)
                  if c.selected and beside_nearer(fit, disparity_left, c, float(slope[c.pair]), window_px,
                                                  config.nearer_fraction) else c for c in cands]
-    if world_map is not None and cov_X is not None and config.nearer_fraction < 1.0:
+    if world_map is not None and cov_X is not None and config.nearer_fraction < 1.0 and any(c.selected for c in cands):
         # only the ends whose depth step the disparity test above cannot see: a step within the wall's band
         band_px = float(fit.prediction.gate * np.median(fit.prediction.sigma_d)) + 1.0
         sil = nearer_silhouettes(camera, fit.X, cov_X, world_map, fit.plane, max_step_px=band_px)

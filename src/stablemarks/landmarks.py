@@ -142,7 +142,7 @@ class LandmarkConfig:
     of the map is seen against this one while standing too little in front of it for the disparity to show
     (:func:`nearer_silhouettes`: the hall's screens 1 m in front of its walls at 10 m, 0.6 px). Measured with
     ``stablemarks eval`` (20 trials, December 2026): corridor selection precision 0.91 → 1.00 (pose NEES 1.8 →
-    2.8), hall 0.90 → 0.97 (recall 0.74 → 0.73); lab, room and office as before within a trial's difference.
+    2.8), hall 0.90 → 0.97 (recall 0.74 → 0.73), room's recall 0.97 → 0.94; lab unchanged, office's 0.89 too.
     1 turns both tests off."""
     min_edge_step_sigma: float = 3.0
     """A free edge is searched only where the map puts something at a different depth just beyond it: the

@@ -922,7 +922,7 @@ def beside_nearer(fit: PlaneFit, disparity_left: np.ndarray, c: Candidate, slope
     (:meth:`~stablemarks.planes.PlanePrediction.disparity_at`, ``gate`` σ and 1 px) on most of each row's
     samples, on at least ``fraction`` of the rows that hold a disparity there (and at least a third of all)."""
     pred = fit.prediction
-    rows_box, cols_box, _ = pred.band_box(disparity_left)
+    rows_box, cols_box = pred.box(disparity_left.shape[0])
     v0 = max(int(np.ceil(c.v_top)), rows_box.start)
     v1 = min(int(np.floor(c.v_bottom)), rows_box.stop - 1)
     if v1 - v0 < 4:

@@ -115,11 +115,9 @@ def prediction_regions(predictions: list[PlanePrediction], shape: tuple[int, int
     lim = disparity_limits(config.sad, W)
     left, right = [], []
     for pred in predictions:
-        u0, u1 = pred.window
-        v0 = max(0, math.ceil(pred.v_top.min() - rm))
-        v1 = min(H - 1, math.floor(pred.v_bottom.max() + rm))
-        if v1 >= v0:
-            left.append((v0, v1 + 1, u0, u1 + 1))
+        rows, cols = pred.box(H, rm)
+        if rows.stop > rows.start:
+            left.append((rows.start, rows.stop, cols.start, cols.stop))
         r0 = max(0, math.floor(pred.v_top.min() - rm))
         r1 = min(H - 1, math.ceil(pred.v_bottom.max() + rm))
         for windows in edge_windows([pred], config):

@@ -135,14 +135,18 @@ class PlanePrediction:
         """:meth:`band` inside its bounding box: ``(rows, cols, ok)``, ``ok`` (h, K) the band's pixels of
         ``disparity[rows, cols]`` (the window's K columns, the rows the wall's top and bottom reach); the
         band holds no pixel outside the box."""
-        H = disparity.shape[0]
+        rows, cols = self.box(disparity.shape[0], row_margin)
+        ok = _band(disparity[rows, cols], rows.start, self.d, self.sigma_d, self.v_top, self.v_bottom,
+                   float(self.gate), float(row_margin))
+        return rows, cols, ok
+
+    def box(self, height: int, row_margin: float = 0.0) -> tuple[slice, slice]:
+        """The bounding box ``(rows, cols)`` of :meth:`band` in images ``height`` rows high: the window's columns,
+        the rows the wall's top and bottom reach (``row_margin`` beyond); empty rows when none is inside."""
         u0, u1 = self.window
         v0 = max(0, int(np.ceil(self.v_top.min() - row_margin)))
-        v1 = max(v0 - 1, min(H - 1, int(np.floor(self.v_bottom.max() + row_margin))))
-        rows, cols = slice(v0, v1 + 1), slice(u0, u1 + 1)
-        ok = _band(disparity[rows, cols], v0, self.d, self.sigma_d, self.v_top, self.v_bottom, float(self.gate),
-                   float(row_margin))
-        return rows, cols, ok
+        v1 = max(v0 - 1, min(height - 1, int(np.floor(self.v_bottom.max() + row_margin))))
+        return slice(v0, v1 + 1), slice(u0, u1 + 1)
 
 
 def column_depth_on_wall(camera: StereoCamera, X, plane: ReferencePlane, u, *, jacobian: bool = False):

@@ -99,3 +99,49 @@ def test_beside_nearer_interpolates_as_numpy_between_columns():
     got = np.array([_interp(v, xp, fp) for v in x])
     np.testing.assert_array_equal(got, want)
     assert _interp(3.0, np.array([2.0]), np.array([7.0])) == np.interp(3.0, [2.0], [7.0])
+
+
+# ------------------------------------------------------------------ boundary search on the regions' blocks
+def test_block_boundary_columns_equal_the_full_region():
+    """A region empty outside a block (anywhere: inside, across and beyond the window and the image), searched as
+    the block: the same rows and columns as :func:`_boundary_columns` of the whole (H, W) mask."""
+    from stablemarks.landmarks import _block_boundary_columns, _boundary_columns
+
+    rng = np.random.default_rng(11)
+    for trial in range(400):
+        H, W = int(rng.integers(1, 40)), int(rng.integers(1, 90))
+        v0, u0 = int(rng.integers(0, H)), int(rng.integers(0, W))
+        h, w = int(rng.integers(0, H - v0 + 1)), int(rng.integers(0, W - u0 + 1))
+        block = rng.random((h, w)) < rng.uniform(0.05, 0.95)
+        region = np.zeros((H, W), bool)
+        region[v0 : v0 + h, u0 : u0 + w] = block
+        lo = float(rng.uniform(-10, W + 5))
+        hi = lo + float(rng.uniform(-3, W))
+        for outward in (-1, 1):
+            for hole in (0, 2, 7):
+                got = _block_boundary_columns(block, v0, u0, W, lo, hi, outward, hole)
+                want = _boundary_columns(region, lo, hi, outward, hole)
+                for g, wnt in zip(got, want, strict=True):
+                    assert g.dtype == wnt.dtype and np.array_equal(g, wnt), (trial, outward, hole)
+
+
+def test_right_block_is_the_right_region(models):
+    """The right-image region of every fitted plane's edge windows (and of the whole image), as a block: the
+    same mask as :func:`right_region`, nothing outside the block."""
+    from stablemarks.landmarks import _right_block, right_region
+
+    n = 0
+    for _name, _k, front, model in models:
+        disp_r = front.disparity.right
+        for fit in (f for f in model.fits if f):
+            pred = fit.prediction
+            windows = [None] + [(int(np.floor(lo)) - 1, int(np.ceil(hi)) + 1) for lo, hi in
+                                (e.window(1, 3.0) for e in pred.edges.values() if np.all(np.isfinite(e.u)))]
+            for cols in windows:
+                full = right_region(pred, disp_r, 4.0, cols)
+                v0, c0, block = _right_block(pred, disp_r, 4.0, cols)
+                rebuilt = np.zeros_like(full)
+                rebuilt[v0 : v0 + block.shape[0], c0 : c0 + block.shape[1]] = block
+                assert np.array_equal(rebuilt, full)
+                n += int(block.sum())
+    assert n > 1000

@@ -283,6 +283,25 @@ def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int, ma
     return _row_ends(np.ascontiguousarray(region, dtype=np.bool_), c0, c1, int(outward), int(max_hole))
 
 
+def _block_boundary_columns(block: np.ndarray, v0: int, u0: int, W: int, lo: float, hi: float, outward: int,
+                            max_hole: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_boundary_columns` of a region ``W`` columns wide that holds no pixel outside ``block`` (h, w), its
+    rows ``v0 …`` and columns ``u0 …``: the same rows and columns, walking only the block's rows of the window
+    (rows outside it have no end). Why: the search reads a few dozen columns of a plane's rows, the full-image
+    masks cost an (H, W) allocation and a walk over every image row."""
+    c0 = math.floor(min(max(lo, 0), W - 1))
+    c1 = math.ceil(min(max(hi, 0), W - 1))
+    if c1 < c0:
+        return np.zeros(0, int), np.zeros(0)
+    h, w = block.shape
+    window = np.zeros((h, c1 - c0 + 1), dtype=np.bool_)  # the window's columns, False off the block
+    a, b = max(c0, u0), min(c1, u0 + w - 1)
+    if b >= a:
+        window[:, a - c0 : b - c0 + 1] = block[:, a - u0 : b - u0 + 1]
+    rows, cols = _row_ends(window, 0, c1 - c0, int(outward), int(max_hole))
+    return rows + v0, cols + c0
+
+
 @njit(cache=True)
 def _row_ends(region, c0, c1, outward, max_hole):  # pragma: no cover - numba
     """:func:`_boundary_columns` on the window of columns ``c0…c1`` of ``region`` (H, W): per row, walking
@@ -358,19 +377,28 @@ def right_region(prediction, disparity_right: np.ndarray, row_margin: float = 0.
     A right pixel ``x`` with disparity ``d`` sees the left column ``x + d``, where the band is tested.
     ``columns`` (first, last) limits the work to a window of right-image columns; the mask is (H, W).
     """
+    out = np.zeros(disparity_right.shape, dtype=bool)
+    v0, c0, block = _right_block(prediction, disparity_right, row_margin, columns)
+    out[v0 : v0 + block.shape[0], c0 : c0 + block.shape[1]] = block
+    return out
+
+
+def _right_block(prediction, disparity_right: np.ndarray, row_margin: float = 0.0,
+                 columns: tuple[int, int] | None = None) -> tuple[int, int, np.ndarray]:
+    """:func:`right_region` inside its bounding block: ``(v0, c0, block)``, ``block`` (h, w) the mask's rows
+    ``v0 …`` and columns ``c0 …`` (the rows the plane reaches, the ``columns`` asked for); the mask holds no pixel
+    outside it (an empty block when none)."""
     H, W = disparity_right.shape
     c0, c1 = (0, W - 1) if columns is None else (max(0, int(columns[0])), min(W - 1, int(columns[1])))
-    out = np.zeros((H, W), dtype=bool)
     if c1 < c0:
-        return out
+        return 0, 0, np.zeros((0, 0), dtype=bool)
     v0 = max(0, int(np.floor(prediction.v_top.min() - row_margin)))
     v1 = min(H - 1, int(np.ceil(prediction.v_bottom.max() + row_margin)))
     if v1 < v0:
-        return out
-    out[v0 : v1 + 1, c0 : c1 + 1] = _right_band(
+        return 0, 0, np.zeros((0, 0), dtype=bool)
+    return v0, c0, _right_band(
         disparity_right[v0 : v1 + 1, c0 : c1 + 1], c0, v0, int(prediction.columns[0]), prediction.d,
         prediction.sigma_d, prediction.v_top, prediction.v_bottom, float(prediction.gate), float(row_margin))
-    return out
 
 
 @njit(cache=True)
@@ -440,11 +468,16 @@ def search_boundary(
     var_b = np.zeros(2)
     rows_used = 0
     snapped = False
-    regions = [fit.region, None]
+    # each image's region as a block (rows v0 …, columns u0 …) of an image W wide, empty outside it: the left
+    # region's box rows, the right region computed in the search window only (_block_boundary_columns)
+    H, W = fit.region.shape
+    v0, v1, _ = fit.box[0].indices(H)
+    regions = [(fit.region[v0:max(v0, v1)], v0, 0), None]
     if disparity_right is not None and np.all(np.isfinite(e.u)):
         lo_r, hi_r = e.window(1, config.search_sigma)
-        regions[1] = right_region(pred, disparity_right, plane_config.row_margin_px,
-                                  (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
+        rv0, rc0, block = _right_block(pred, disparity_right, plane_config.row_margin_px,
+                                       (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
+        regions[1] = (block, rv0, rc0)
     outwards = [-1 if e.u[img] < u_inner[img] else 1 for img in (0, 1)]
     right_found = True
     for img in (0, 1):
@@ -455,8 +488,9 @@ def search_boundary(
         if regions[img] is None:
             rows, cols = np.zeros(0, int), np.zeros(0)
         else:
-            rows, cols = _boundary_columns(regions[img], lo, hi, outward, int(w // 2) if bridge_px is None
-                                           else int(bridge_px))
+            block, bv0, bu0 = regions[img]
+            rows, cols = _block_boundary_columns(block, bv0, bu0, disparity_right.shape[1] if img else W, lo, hi,
+                                                 outward, int(w // 2) if bridge_px is None else int(bridge_px))
             keep = robust_rows(cols, config.row_outlier_mad)
             rows, cols = rows[keep], cols[keep]
         if len(rows) < config.min_boundary_rows:
@@ -986,7 +1020,12 @@ def _beside_nearer_sides(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o
     """:func:`beside_nearer_sides` in the band box ``[r0, r1) × [c0, c1)`` of the left disparity ``disp``, the
     samples at offsets ``o0 … o1 − 1`` either side of each line (left side first). Per line and side, as the
     former array code: each row's sample columns ``rint(u_row ± offset)``, ``u_row = u_left + slope (v − mid)``;
-    a sample holds a disparity when inside the box and finite, is nearer when above ``d_wall + gate σ + 1``."""
+    a sample holds a disparity when inside the box and finite, is nearer when above ``d_wall + gate σ + 1`` at
+    its column (computed once per column of the box)."""
+    limit = np.empty(max(0, c1 - c0))
+    for col in range(c0, c1):
+        fc = float(col)
+        limit[col - c0] = _interp(fc, columns, d) + gate * _interp(fc, columns, sigma_d) + 1.0
     n = len(u_left)
     out = np.zeros(n, dtype=np.int64)
     for i in range(n):
@@ -1011,8 +1050,7 @@ def _beside_nearer_sides(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o
                     if not np.isfinite(x):
                         continue
                     n_valid += 1
-                    fc = float(col)
-                    if x > _interp(fc, columns, d) + gate * _interp(fc, columns, sigma_d) + 1.0:
+                    if x > limit[col - c0]:
                         n_near += 1
                 if n_valid > 0:
                     n_held += 1

@@ -145,3 +145,68 @@ def test_right_block_is_the_right_region(models):
                 assert np.array_equal(rebuilt, full)
                 n += int(block.sum())
     assert n > 1000
+
+
+# ------------------------------------------------------------------ ray/wall crossings
+def crossings_reference(origins, rays, walls, exclude=()):
+    """The former :func:`stablemarks.maps._crossings`, in NumPy arrays."""
+    o = np.asarray(origins, dtype=float).reshape(-1, 2)
+    r = np.asarray(rays, dtype=float).reshape(-1, 2)
+    walls = np.asarray(walls, dtype=float).reshape(-1, 2, 2)
+    if len(exclude):
+        walls = np.delete(walls, list(exclude), axis=0)
+    a = walls[:, 0, :]
+    s = walls[:, 1, :] - a
+    r0, r1 = r[:, 0:1], r[:, 1:2]
+    denom = r0 * s[:, 1] - r1 * s[:, 0]
+    qx = a[:, 0] - o[:, 0:1]
+    qy = a[:, 1] - o[:, 1:2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = (qx * s[:, 1] - qy * s[:, 0]) / denom
+        mu = (qx * r1 - qy * r0) / denom
+    ok = (np.abs(denom) > 1e-12) & (mu >= 0) & (mu <= 1)
+    return np.where(ok, lam, np.nan)
+
+
+def test_crossings_equal_the_reference(scenario_frames):
+    """Random rays against the scenarios' maps (and random walls, some degenerate or parallel to the rays), one
+    origin or one per ray, with walls left out: the same intersections bit for bit (NaN where the reference's)."""
+    from stablemarks.maps import _crossings
+
+    rng = np.random.default_rng(3)
+    maps = [m.segments() for *_, m, _X in scenario_frames[::2]]
+    for trial in range(300):
+        walls = maps[trial % len(maps)] if trial % 3 else rng.normal(0, 4, (int(rng.integers(1, 9)), 2, 2))
+        if trial % 7 == 0:
+            walls = np.concatenate([walls, walls[:1, :1].repeat(2, axis=1)])  # a zero-length wall
+        n = int(rng.integers(1, 30))
+        rays = rng.normal(size=(n, 2))
+        if trial % 5 == 0:
+            rays[0] = walls[0, 1] - walls[0, 0]  # parallel to a wall
+        origins = rng.normal(0, 3, (n, 2)) if trial % 2 else rng.normal(0, 3, 2)
+        exclude = [] if trial % 4 else sorted(set(rng.integers(-len(walls), len(walls), 2).tolist()))
+        got = _crossings(origins, rays, walls, exclude)
+        want = crossings_reference(origins, rays, walls, exclude)
+        assert got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
+
+
+# ------------------------------------------------------------------ the candidates' decisions
+def test_fast_replace_is_dataclasses_replace(models):
+    """:func:`landmarks._replace` (the selection's decisions on a candidate) gives the object
+    ``dataclasses.replace`` gives: equal field by field, arrays the same objects, a Candidate."""
+    import dataclasses
+
+    from stablemarks.landmarks import Candidate, _replace
+
+    cands = [c for *_, model in models for c in model.candidates]
+    assert len(cands) > 50
+    for c in cands:
+        for kw in ({"selected": False, "reason": "beside something nearer"}, {"selected": True, "reason": ""}):
+            got, want = _replace(c, **kw), dataclasses.replace(c, **kw)
+            assert type(got) is Candidate and got is not c
+            for f in dataclasses.fields(Candidate):
+                g, w = getattr(got, f.name), getattr(want, f.name)
+                assert g is w or g == w or (isinstance(g, float) and np.isnan(g) and np.isnan(w)), f.name
+    with pytest.raises(TypeError):
+        _replace(cands[0], no_such_field=1)

@@ -23,7 +23,7 @@ wall (DESIGN.md §4), and landmarks modelled from one boundary share its varianc
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 from numba import njit
@@ -405,7 +405,8 @@ def _right_block(prediction, disparity_right: np.ndarray, row_margin: float = 0.
 def _right_band(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):  # pragma: no cover - numba
     """:func:`right_region` on the box ``sub`` (h, w) of right disparities at rows ``v0…``, columns ``c0…``,
     for a prediction whose window's columns are ``u0, u0 + 1, …`` (consecutive): the left column
-    ``u = x + d`` must lie in the window; the band there is interpolated as ``np.interp`` does."""
+    ``u = x + d`` must lie in the window; the band there is interpolated as ``np.interp`` does. The rows of the
+    band are interpolated only for pixels whose disparity is in it (the same mask, fewer operations)."""
     h, w = sub.shape
     K = len(d)
     u_last = u0 + K - 1
@@ -419,14 +420,17 @@ def _right_band(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):
                 continue
             j = int(u - u0)
             if j == K - 1:
-                dp, sp, vt, vb = d[j], sigma_d[j], v_top[j], v_bottom[j]
-            else:
-                frac = u - float(u0 + j)
-                dp = (d[j + 1] - d[j]) * frac + d[j]
-                sp = (sigma_d[j + 1] - sigma_d[j]) * frac + sigma_d[j]
-                vt = (v_top[j + 1] - v_top[j]) * frac + v_top[j]
-                vb = (v_bottom[j + 1] - v_bottom[j]) * frac + v_bottom[j]
-            out[i, k] = abs(disp - dp) <= gate * sp and v >= vt - row_margin and v <= vb + row_margin
+                out[i, k] = (abs(disp - d[j]) <= gate * sigma_d[j] and v >= v_top[j] - row_margin
+                             and v <= v_bottom[j] + row_margin)
+                continue
+            frac = u - float(u0 + j)
+            dp = (d[j + 1] - d[j]) * frac + d[j]
+            sp = (sigma_d[j + 1] - sigma_d[j]) * frac + sigma_d[j]
+            if not abs(disp - dp) <= gate * sp:
+                continue
+            vt = (v_top[j + 1] - v_top[j]) * frac + v_top[j]
+            vb = (v_bottom[j + 1] - v_bottom[j]) * frac + v_bottom[j]
+            out[i, k] = v >= vt - row_margin and v <= vb + row_margin
     return out
 
 
@@ -748,7 +752,20 @@ def on_wall_reason(c: Candidate, config: LandmarkConfig, z_range: tuple[float, f
 
 
 def _replace(c: Candidate, **kw) -> Candidate:
-    return replace(c, **kw)
+    """``dataclasses.replace(c, **kw)`` for the selection's decisions, without its cost (a frozen dataclass of
+    ~35 fields is rebuilt field by field through ``__init__``: ~15 µs, for every candidate of every frame): a
+    copy of ``c``'s fields with ``kw`` set. Candidate has no ``__post_init__`` or init-only fields, so the two
+    are the same object."""
+    unknown = kw.keys() - _CANDIDATE_FIELDS
+    if unknown:
+        raise TypeError(f"Candidate has no field {sorted(unknown)[0]!r}")
+    new = object.__new__(Candidate)
+    new.__dict__.update(c.__dict__)
+    new.__dict__.update(kw)
+    return new
+
+
+_CANDIDATE_FIELDS = frozenset(f.name for f in fields(Candidate))
 
 
 def _inward(plane, edge: str) -> np.ndarray:
@@ -904,7 +921,7 @@ def landmarks_on_plane(
                  for c in cands]
     if world_map is not None and cov_X is not None and config.nearer_fraction < 1.0 and any(c.selected for c in cands):
         # only the ends whose depth step the disparity test above cannot see: a step within the wall's band
-        band_px = float(fit.prediction.gate * np.median(fit.prediction.sigma_d)) + 1.0
+        band_px = float(fit.prediction.gate * median(fit.prediction.sigma_d)) + 1.0  # np.median, without its overhead
         sil = nearer_silhouettes(camera, fit.X, cov_X, world_map, fit.plane, max_step_px=band_px)
         cands = [_replace(c, selected=False, reason=REASON_BESIDE_NEARER)
                  if c.selected and _at_silhouette(camera, c, sil, config.boundary_sigma) else c

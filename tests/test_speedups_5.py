@@ -210,3 +210,45 @@ def test_fast_replace_is_dataclasses_replace(models):
                 assert g is w or g == w or (isinstance(g, float) and np.isnan(g) and np.isnan(w)), f.name
     with pytest.raises(TypeError):
         _replace(cands[0], no_such_field=1)
+
+
+# ------------------------------------------------------------------ the silhouettes of nearer walls
+def nearer_silhouettes_reference(camera, X, cov_X, world_map, plane, min_offset=0.1, max_step_px=np.inf):
+    """The former :func:`nearer_silhouettes`: every end of every other wall projected, then tested."""
+    out = []
+    fb = camera.f * camera.baseline
+    centres = camera.optical_centres(X)
+    for w in world_map:
+        if w.id == plane.id:
+            continue
+        for E in (w.P1, w.P2):
+            oE = float(plane.offset(E))
+            uv, J, _ = camera.project_columns(X, E, jacobians=True)
+            for img in (0, 1):
+                O = centres[img]
+                oO = float(plane.offset(O))
+                if not np.isfinite(uv[img]) or oO * oE <= 0 or abs(oE) < min_offset or abs(oE) >= abs(oO):
+                    continue
+                W = O + oO / (oO - oE) * (E - O)
+                if fb / np.hypot(*(E - O)) - fb / np.hypot(*(W - O)) > max_step_px:
+                    continue
+                out.append((img, float(uv[img]), float(np.sqrt(max(J[img] @ cov_X @ J[img], 0.0))), tuple(w.z)))
+    return out
+
+
+def test_nearer_silhouettes_equal_the_reference(scenario_frames):
+    """Every wall of every scenario frame's map, from the true pose and moved ones, any step and a small one: the
+    same silhouettes (image, column, σ, heights) bit for bit."""
+    from stablemarks.landmarks import nearer_silhouettes
+
+    rng = np.random.default_rng(9)
+    found = 0
+    for _name, _k, _l, _r, camera, world_map, X in scenario_frames:
+        for trial in range(3):
+            Xt = X + (rng.normal(0, [0.3, 0.3, 0.2]) if trial else 0.0)
+            for plane in world_map:
+                for step in (np.inf, 0.7):
+                    got = nearer_silhouettes(camera, Xt, COV_PRIOR, world_map, plane, max_step_px=step)
+                    assert got == nearer_silhouettes_reference(camera, Xt, COV_PRIOR, world_map, plane, max_step_px=step)
+                    found += len(got)
+    assert found > 20

@@ -939,15 +939,19 @@ def nearer_silhouettes(camera: StereoCamera, X, cov_X, world_map: Map, plane, mi
     out = []
     fb = camera.f * camera.baseline
     centres = camera.optical_centres(X)
+    offsets = [float(plane.offset(O)) for O in centres]
     for w in world_map:
         if w.id == plane.id:
             continue
         for E in (w.P1, w.P2):
             oE = float(plane.offset(E))
+            # not between either camera and the wall: no projection needed (most ends of a map)
+            if all(oO * oE <= 0 or abs(oE) < min_offset or abs(oE) >= abs(oO) for oO in offsets):
+                continue
             uv, J, _ = camera.project_columns(X, E, jacobians=True)
             for img in (0, 1):
                 O = centres[img]
-                oO = float(plane.offset(O))
+                oO = offsets[img]
                 if not np.isfinite(uv[img]) or oO * oE <= 0 or abs(oE) < min_offset or abs(oE) >= abs(oO):
                     continue  # not in front of the camera, or not between the camera and the wall
                 W = O + oO / (oO - oE) * (E - O)  # where the sight line past the end meets the wall

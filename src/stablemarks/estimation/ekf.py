@@ -192,6 +192,13 @@ class NewLandmark:
         return 1 if self.kind == "wall" else 2
 
 
+@functools.lru_cache(maxsize=256)
+def _chi2_gate(dof: int, tail: float) -> float:
+    """``chdtri(dof, tail)``, the χ² gate of ``dof`` degrees of freedom, remembered: :meth:`JointEKF.associate_joint`
+    asks for the same few gates once per trial pair, every frame (a scipy ufunc call each, ~5 µs)."""
+    return chdtri(dof, tail)
+
+
 @dataclass
 class _Track:
     """The filter's bookkeeping of one landmark (its value and covariance live in the state).
@@ -781,7 +788,7 @@ class JointEKF:
             trial = chosen + [(int(ids[r]), int(c))]
             tr = taken_r + [int(r)]
             nis = self._joint_nis(rows[tr], z[[j for _, j in trial]], uv[tr], J_I_X[tr], J_I_l[tr])
-            if nis <= chdtri(2 * len(trial), 1.0 - p):
+            if nis <= _chi2_gate(2 * len(trial), 1.0 - p):
                 chosen = trial
                 taken_r = tr
                 used_r.add(r)

@@ -823,6 +823,11 @@ def landmarks_on_plane(
                             border_sigma_px, bridge)
         if b is None:
             continue
+        if disparity_left is not None and config.nearer_fraction < 1.0 and \
+                occluded_boundary(camera, fit, disparity_left, b, window_px, config.nearer_fraction):
+            rejected.append((b, f"plane {fit.plane.label!r}: the boundary found at {edge} is the silhouette of "
+                                "something nearer standing in front of the wall, not its end: not used"))
+            continue
         if cov_X is not None:
             off, sigma = boundary_disagreement(b, fit.plane, fit.X, cov_X)
             if abs(off) > config.boundary_gate_sigma * sigma:
@@ -921,16 +926,40 @@ def beside_nearer(fit: PlaneFit, disparity_left: np.ndarray, c: Candidate, slope
     inside the plane's band box (the pixels :func:`select_landmarks` computes), is above the wall's band
     (:meth:`~stablemarks.planes.PlanePrediction.disparity_at`, ``gate`` σ and 1 px) on most of each row's
     samples, on at least ``fraction`` of the rows that hold a disparity there (and at least a third of all)."""
+    return _nearer_side(fit, disparity_left, c.u_left, c.v_top, c.v_bottom, slope, window_px, fraction)
+
+
+def occluded_boundary(camera: StereoCamera, fit: PlaneFit, disparity_left: np.ndarray, b: Boundary,
+                      window_px: float, fraction: float) -> bool:
+    """Whether boundary ``b`` is the silhouette of something standing in front of its wall rather than the
+    wall's end: beyond it (outward, away from the wall), over the wall's rows at that column, the left disparity
+    is nearer than the wall's band as :func:`beside_nearer` reads it. A free edge has something *farther* beyond
+    it (the map's depth step, :func:`edge_depth_step`); a nearer surface there hides the end, and the planar
+    region stops at the occluder's side (the office: a pole 0.8 m in front of the white board's end, whose
+    region ended 16–34 px inside the hidden edge, 6–16 cm along the wall)."""
+    pred = fit.prediction
+    u = float(b.u[0])
+    inner = float(_inner_columns(camera, fit.X, fit.plane, b.edge)[0])
+    outward = -1 if u < inner else 1
+    v_top = float(np.interp(u, pred.columns, pred.v_top))
+    v_bottom = float(np.interp(u, pred.columns, pred.v_bottom))
+    return _nearer_side(fit, disparity_left, u, v_top, v_bottom, 0.0, window_px, fraction, (outward,)) == outward
+
+
+def _nearer_side(fit: PlaneFit, disparity_left: np.ndarray, u: float, v_top: float, v_bottom: float, slope: float,
+                 window_px: float, fraction: float, sides: tuple[int, ...] = (-1, 1)) -> int:
+    """:func:`beside_nearer` for a line at column ``u`` (at mid-height) spanning rows ``v_top``–``v_bottom``
+    with ``slope`` [px/row], looking on ``sides``."""
     pred = fit.prediction
     rows_box, cols_box = pred.box(disparity_left.shape[0])
-    v0 = max(int(np.ceil(c.v_top)), rows_box.start)
-    v1 = min(int(np.floor(c.v_bottom)), rows_box.stop - 1)
+    v0 = max(int(np.ceil(v_top)), rows_box.start)
+    v1 = min(int(np.floor(v_bottom)), rows_box.stop - 1)
     if v1 - v0 < 4:
         return 0
     rows = np.arange(v0, v1 + 1)
-    u_rows = c.u_left + slope * (rows - 0.5 * (c.v_top + c.v_bottom))
+    u_rows = u + slope * (rows - 0.5 * (v_top + v_bottom))
     offsets = np.arange(int(window_px // 2) + 1, int(window_px) + 2)
-    for side in (-1, 1):
+    for side in sides:
         cols = np.rint(u_rows[:, None] + side * offsets[None, :]).astype(int)
         inside = (cols >= cols_box.start) & (cols < cols_box.stop)
         d = np.where(inside, disparity_left[rows[:, None], np.clip(cols, cols_box.start, cols_box.stop - 1)], np.nan)

@@ -27,8 +27,9 @@ def models(scenario_frames):
 
 
 # ------------------------------------------------------------------ beside something nearer
-def beside_nearer_reference(fit, disparity_left, c, slope, window_px, fraction):
-    """The former :func:`beside_nearer`: per side, the (rows, offsets) samples as arrays."""
+def beside_nearer_reference(fit, disparity_left, c, slope, window_px, fraction, sides=(-1, 1)):
+    """The former :func:`beside_nearer` (with ``sides``: main's ``_nearer_side``): per side, the (rows, offsets)
+    samples as arrays."""
     pred = fit.prediction
     rows_box, cols_box = pred.box(disparity_left.shape[0])
     v0 = max(int(np.ceil(c.v_top)), rows_box.start)
@@ -38,7 +39,7 @@ def beside_nearer_reference(fit, disparity_left, c, slope, window_px, fraction):
     rows = np.arange(v0, v1 + 1)
     u_rows = c.u_left + slope * (rows - 0.5 * (c.v_top + c.v_bottom))
     offsets = np.arange(int(window_px // 2) + 1, int(window_px) + 2)
-    for side in (-1, 1):
+    for side in sides:
         cols = np.rint(u_rows[:, None] + side * offsets[None, :]).astype(int)
         inside = (cols >= cols_box.start) & (cols < cols_box.stop)
         d = np.where(inside, disparity_left[rows[:, None], np.clip(cols, cols_box.start, cols_box.stop - 1)], np.nan)
@@ -84,6 +85,11 @@ def test_beside_nearer_equals_the_reference(models):
                     assert one == want
                     for s in want:
                         sides[s] += 1
+                    for one_side in ((1,), (-1,)):  # occluded_boundary looks on one side
+                        got = beside_nearer_sides(fit, image, [c.u_left for c in cands], [c.v_top for c in cands],
+                                                  [c.v_bottom for c in cands], slope, window, fraction, one_side)
+                        assert got.tolist() == [beside_nearer_reference(fit, image, c, s, window, fraction, one_side)
+                                                for c, s in zip(cands, slope, strict=True)]
     assert min(sides.values()) >= 20, sides
 
 

@@ -874,6 +874,11 @@ def landmarks_on_plane(
                             border_sigma_px, bridge)
         if b is None:
             continue
+        if disparity_left is not None and config.nearer_fraction < 1.0 and \
+                occluded_boundary(camera, fit, disparity_left, b, window_px, config.nearer_fraction):
+            rejected.append((b, f"plane {fit.plane.label!r}: the boundary found at {edge} is the silhouette of "
+                                "something nearer standing in front of the wall, not its end: not used"))
+            continue
         if cov_X is not None:
             off, sigma = boundary_disagreement(b, fit.plane, fit.X, cov_X)
             if abs(off) > config.boundary_gate_sigma * sigma:
@@ -985,10 +990,29 @@ def beside_nearer(fit: PlaneFit, disparity_left: np.ndarray, c: Candidate, slope
                                    np.array([c.v_bottom]), np.array([slope]), window_px, fraction)[0])
 
 
+def occluded_boundary(camera: StereoCamera, fit: PlaneFit, disparity_left: np.ndarray, b: Boundary,
+                      window_px: float, fraction: float) -> bool:
+    """Whether boundary ``b`` is the silhouette of something standing in front of its wall rather than the
+    wall's end: beyond it (outward, away from the wall), over the wall's rows at that column, the left disparity
+    is nearer than the wall's band as :func:`beside_nearer` reads it. A free edge has something *farther* beyond
+    it (the map's depth step, :func:`edge_depth_step`); a nearer surface there hides the end, and the planar
+    region stops at the occluder's side (the office: a pole 0.8 m in front of the white board's end, whose
+    region ended 16–34 px inside the hidden edge, 6–16 cm along the wall)."""
+    pred = fit.prediction
+    u = float(b.u[0])
+    inner = float(_inner_columns(camera, fit.X, fit.plane, b.edge)[0])
+    outward = -1 if u < inner else 1
+    v_top = float(np.interp(u, pred.columns, pred.v_top))
+    v_bottom = float(np.interp(u, pred.columns, pred.v_bottom))
+    return int(beside_nearer_sides(fit, disparity_left, [u], [v_top], [v_bottom], [0.0], window_px, fraction,
+                                   (outward,))[0]) == outward
+
+
 def beside_nearer_sides(fit: PlaneFit, disparity_left: np.ndarray, u_left, v_top, v_bottom, slope,
-                        window_px: float, fraction: float) -> np.ndarray:
-    """:func:`beside_nearer` of several lines at once: (n,) int sides of the lines with left columns ``u_left``,
-    rows ``v_top`` … ``v_bottom`` and slopes ``slope`` (n,) [px per row]. One numba pass over all the lines
+                        window_px: float, fraction: float, sides: tuple[int, ...] = (-1, 1)) -> np.ndarray:
+    """:func:`beside_nearer` of several lines at once: (n,) int sides of the lines with left columns ``u_left``
+    (at mid-height), rows ``v_top`` … ``v_bottom`` and slopes ``slope`` (n,) [px per row], looking on ``sides``
+    in that order (:func:`occluded_boundary` looks on one). One numba pass over all the lines
     (:func:`_beside_nearer_sides`): the former per-line NumPy expressions cost ~0.2 ms a line in small-array
     overhead, a frame's selected lines ~2 ms; the same samples, arithmetic and decisions."""
     pred = fit.prediction
@@ -999,7 +1023,7 @@ def beside_nearer_sides(fit: PlaneFit, disparity_left: np.ndarray, u_left, v_top
         np.asarray(v_bottom, dtype=np.float64), np.asarray(slope, dtype=np.float64),
         int(window_px // 2) + 1, int(window_px) + 2, np.asarray(pred.columns, dtype=np.float64),
         np.asarray(pred.d, dtype=np.float64), np.asarray(pred.sigma_d, dtype=np.float64), float(pred.gate),
-        float(fraction))
+        float(fraction), np.asarray(sides, dtype=np.int64))
 
 
 @njit(cache=True)
@@ -1037,9 +1061,9 @@ def _interp(x, xp, fp):  # pragma: no cover - numba
 
 @njit(cache=True)
 def _beside_nearer_sides(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o0, o1, columns, d, sigma_d, gate,
-                         fraction):  # pragma: no cover - numba
+                         fraction, sides):  # pragma: no cover - numba
     """:func:`beside_nearer_sides` in the band box ``[r0, r1) × [c0, c1)`` of the left disparity ``disp``, the
-    samples at offsets ``o0 … o1 − 1`` either side of each line (left side first). Per line and side, as the
+    samples at offsets ``o0 … o1 − 1`` on each of ``sides`` of each line (in that order). Per line and side, as the
     former array code: each row's sample columns ``rint(u_row ± offset)``, ``u_row = u_left + slope (v − mid)``;
     a sample holds a disparity when inside the box and finite, is nearer when above ``d_wall + gate σ + 1`` at
     its column (computed once per column of the box)."""
@@ -1056,7 +1080,7 @@ def _beside_nearer_sides(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o
             continue
         n_rows = v1 - v0 + 1
         mid = 0.5 * (v_top[i] + v_bottom[i])
-        for side in (-1, 1):
+        for side in sides:
             n_held = 0
             n_nearer = 0
             for v in range(v0, v1 + 1):

@@ -24,6 +24,15 @@ condition's name first):
     the pattern to fit (:meth:`stablemarks.Localizer.step`) and updates from it.
 ``blind``
     no landmark observed for ``blind_frames`` frames in a row (while the filter holds landmarks).
+``heading_drift``
+    over the last ``drift_frames`` frames the images turned the heading away from the odometry's by more than
+    ``drift_sigma`` σ of what the odometry's heading noise over those frames and the filter's heading uncertainty
+    at both ends allow. A head pan that changes without being recorded (a recording without its pan, a wrong
+    pan topic) turns the walls slowly; the filter takes the turn into the heading frame by frame, each step
+    within its gates, and ``edges_not_found`` never holds (the corridor with its pans left out: 0.2 rad taken in
+    over 30 frames, ATE three times dead reckoning's). From then on the estimate is dead reckoning (the pose
+    and its covariance from the start pose and the odometry alone: the images' history is not to be trusted) and
+    nothing is associated, updated or entered; it holds for the rest of the run.
 """
 
 from __future__ import annotations
@@ -32,7 +41,7 @@ from dataclasses import dataclass
 
 from .errors import ConfigError, expected
 
-CONDITIONS = ("edges_not_found", "inconsistent", "odometry_disagrees", "blind")
+CONDITIONS = ("edges_not_found", "inconsistent", "odometry_disagrees", "blind", "heading_drift")
 
 
 @dataclass(frozen=True)
@@ -52,13 +61,20 @@ class HealthConfig:
     search_inflation: float = 25.0
     """When the walls are not found where the prediction puts them, they are looked for again with the pose
     covariance widened by this factor (5 σ for 1 σ), before a slip or kidnap can be recognised."""
+    drift_frames: int = 5
+    """Frames over which the heading the images give is compared with the odometry's (``heading_drift``)."""
+    drift_sigma: float = 4.0
+    """How many σ the images may turn the heading from the odometry's over ``drift_frames`` frames before
+    ``heading_drift`` holds. Measured on clean runs of every built-in scenario (first trials, and two more of
+    corridor, office and hall): at most 2.5 σ over 5 frames; the corridor with its pans left out: 4 σ at frame
+    24, 5 σ at 25."""
 
     def __post_init__(self) -> None:
-        for name in ("edges_frames", "nis_frames", "disagree_frames", "blind_frames", "min_pattern"):
+        for name in ("edges_frames", "nis_frames", "disagree_frames", "blind_frames", "min_pattern", "drift_frames"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(expected("a positive integer", v, where=f"health.{name}"))
-        for name in ("max_inflation", "search_inflation"):
+        for name in ("max_inflation", "search_inflation", "drift_sigma"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 1:
                 raise ConfigError(expected("a number >= 1", v, where=f"health.{name}"))
@@ -74,6 +90,10 @@ MESSAGES = {
     "odometry_disagrees": "odometry_disagrees: the landmarks on a wall all pull the same way, incompatible with the "
                           "odometry (a wheel slip or a kidnap?): the pose covariance was widened ×{factor:.3g}",
     "blind": "blind: no landmark observed for {n} frames",
+    "heading_drift": "heading_drift: the images turned the heading {drift:+.1f}° from the odometry's over {w} frames "
+                     "({z:.1f} σ): the head's pan may be wrong or changing unrecorded (a bag's pan comes from "
+                     "`pan_topic`, a sequence folder's from the pan column of frames.csv); the estimate is dead "
+                     "reckoning from here on and nothing is updated from the images",
 }
 
 
@@ -84,18 +104,25 @@ class HealthMonitor:
         self.config = config
         self.runs = dict.fromkeys(CONDITIONS, 0)
         self.edges_latched = False
+        self.drift: tuple[float, float] | None = None
+        """``(turn [deg], z)`` when ``heading_drift`` first held (it then holds for the rest of the run)."""
         self._clean = 0
 
     def update(self, *, edges_missing: bool, nis_high: bool, disagree: bool, observed: bool, has_landmarks: bool,
-               inflation: float = 1.0, edges_found: bool | None = None) -> list[str]:
+               inflation: float = 1.0, edges_found: bool | None = None,
+               drift: tuple[float, float] | None = None) -> list[str]:
         """Advance the counters by one frame; returns the sentences of the conditions that hold now.
 
         ``edges_found``: whether the frame found its walls where the map puts them, which is what clears
-        ``edges_not_found`` (default: not ``edges_missing``; a frame can be neither, e.g. one wall turned)."""
+        ``edges_not_found`` (default: not ``edges_missing``; a frame can be neither, e.g. one wall turned).
+        ``drift``: ``(turn [deg], z)`` when the images turned the heading from the odometry's beyond
+        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on)."""
         c = self.config
         found = _found(edges_missing, edges_found)
+        if drift is not None and self.drift is None:
+            self.drift = drift
         now = {"edges_not_found": edges_missing, "inconsistent": nis_high, "odometry_disagrees": disagree,
-               "blind": has_landmarks and not observed}
+               "blind": has_landmarks and not observed, "heading_drift": self.drift is not None}
         for k, v in now.items():
             self.runs[k] = self.runs[k] + 1 if v else 0
         # edges_not_found holds until as many frames in a row find every searched edge where the map puts it
@@ -106,7 +133,9 @@ class HealthMonitor:
             self.edges_latched = False
         if self.edges_latched:
             self.runs["edges_not_found"] = max(self.runs["edges_not_found"], c.edges_frames)
-        return [MESSAGES[k].format(n=self.runs[k], factor=inflation) for k in CONDITIONS if self.holds(k)]
+        turn, z = self.drift if self.drift is not None else (0.0, 0.0)
+        return [MESSAGES[k].format(n=self.runs[k], factor=inflation, drift=turn, z=z, w=c.drift_frames)
+                for k in CONDITIONS if self.holds(k)]
 
     def suspect_edges(self, edges_missing: bool, edges_found: bool | None = None) -> bool:
         """Whether, with this frame's ``edges_missing`` (and ``edges_found``, :meth:`update`), ``edges_not_found``
@@ -121,7 +150,7 @@ class HealthMonitor:
         """Whether condition ``name`` held at the last update."""
         c = self.config
         need = {"edges_not_found": c.edges_frames, "inconsistent": c.nis_frames,
-                "odometry_disagrees": c.disagree_frames, "blind": c.blind_frames}[name]
+                "odometry_disagrees": c.disagree_frames, "blind": c.blind_frames, "heading_drift": 1}[name]
         return self.runs[name] >= need
 
 

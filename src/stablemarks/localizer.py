@@ -21,6 +21,7 @@ frame (only their differences are used); pans [rad] relative to the robot's head
 
 from __future__ import annotations
 
+import collections
 import math
 import time
 from dataclasses import dataclass, field
@@ -31,7 +32,7 @@ from scipy.special import chdtri
 
 from .config import Config
 from .errors import InputError, expected
-from .estimation import JointEKF, LandmarkEstimate
+from .estimation import JointEKF, LandmarkEstimate, motion
 from .estimation.association import lone_gate_px
 from .geometry import SE2, StereoCamera
 from .health import HealthMonitor
@@ -276,6 +277,12 @@ class Localizer:
         if prior_landmarks is not None:
             self.ekf.load_prior_landmarks(prior_landmarks, world_map)
         self._dead_reckoning = SE2.from_array(start)
+        self._dr_cov = self.start_cov.copy()
+        """Covariance of the dead reckoning (the start covariance carried through the odometry alone)."""
+        self._heading_track: collections.deque = collections.deque(maxlen=self.config.health.drift_frames + 1)
+        """Per frame: (estimate's heading − dead reckoning's [rad, unwrapped], the estimate's heading σ [rad], the
+        odometry's heading variance summed since the start [rad²]): the ``heading_drift`` test."""
+        self._odo_heading_var = 0.0
         self._missed: dict[int, int] = {}
         self._turn_ref: _Turn | None = None
         """The last turn of the walls together while ``edges_not_found`` may hold (see :meth:`step`)."""
@@ -366,6 +373,22 @@ class Localizer:
                 out.append(i)
         return out
 
+    def _heading_drift(self) -> tuple[float, float] | None:
+        """``(turn [deg], z)`` when, over the last ``health.drift_frames`` frames, the estimate's heading has turned
+        from the dead reckoning's by more than ``health.drift_sigma`` σ, with σ² the odometry's heading variance
+        over those frames plus ``(σ_θ now + σ_θ then)²`` (the filter's heading errors at both ends, taken as fully
+        correlated: the bound the difference of two correlated errors can reach); else None."""
+        track = self._heading_track
+        d = float(self.ekf.pose[2] - self._dead_reckoning.theta)
+        if track:
+            d = track[-1][0] + float(np.angle(np.exp(1j * (d - track[-1][0]))))
+        track.append((d, float(np.sqrt(self.ekf.cov_pose[2, 2])), self._odo_heading_var))
+        if len(track) < track.maxlen:
+            return None
+        (d0, s0, q0), (d1, s1, q1) = track[0], track[-1]
+        z = (d1 - d0) / math.sqrt(q1 - q0 + (s0 + s1) ** 2)
+        return (math.degrees(d1 - d0), z) if abs(z) > self.config.health.drift_sigma else None
+
     def _increment(self, odometry) -> tuple[SE2 | None, np.ndarray | None]:
         if odometry is None:
             return None, None
@@ -408,6 +431,9 @@ class Localizer:
         if U is not None:
             cov_U = self.config.odometry.covariance(SE2.from_array(U))
             self.ekf.predict(U, cov_U)
+            _, F, J = motion(self._dead_reckoning.as_array(), U, jacobians=True)
+            self._dr_cov = F @ self._dr_cov @ F.T + J @ cov_U @ J.T
+            self._odo_heading_var += float(cov_U[2, 2])
             self._dead_reckoning = self._dead_reckoning @ SE2.from_array(U)
         if odo_pose is not None:
             self._odometry = odo_pose
@@ -455,7 +481,8 @@ class Localizer:
             edges_found = not edges_missing and turn.m2 <= SLOPE_GATE_CHI2
             if edges_found and self._turn_ref is not None and self.health.edges_latched:
                 edges_found = turn.turned_back(self._turn_ref)
-            pan_suspect = self.health.suspect_edges(edges_missing, edges_found) or turned
+            pan_suspect = self.health.suspect_edges(edges_missing, edges_found) or turned or \
+                self.health.drift is not None
             report: dict = {}
             assoc = [] if pan_suspect else method.associate(self.ekf, front, model, pan, cam_k, report,
                                                             self._max_incidence)
@@ -519,6 +546,10 @@ class Localizer:
                                        self.config)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
             timings["select"] = time.perf_counter() - t3
+        drift = self._heading_drift() if method.uses_vision and self.health.drift is None else None
+        if drift is not None:
+            # the images' heading has run away from the odometry's: fall back on dead reckoning (module health)
+            self.ekf.reset_pose(self._dead_reckoning.as_array(), self._dr_cov)
         self._pan = pan
         if self._stamp is not None and stamp > self._stamp:
             self._dt = float(stamp) - self._stamp
@@ -529,7 +560,7 @@ class Localizer:
         record.pan_command = self.command_pan()
         record.health = self.health.update(edges_missing=edges_missing, nis_high=nis_high, disagree=disagree,
                                            observed=bool(record.observed), has_landmarks=self.ekf.n_landmarks > 0,
-                                           inflation=record.inflation, edges_found=edges_found)
+                                           inflation=record.inflation, edges_found=edges_found, drift=drift)
         if not self.health.edges_latched and not turned:
             self._turn_ref = None
         timings["total"] = time.perf_counter() - t0

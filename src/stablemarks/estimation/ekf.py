@@ -536,6 +536,19 @@ class JointEKF:
         k = 2 if position_only else 3
         self._P[:k, :k] *= factor
 
+    def reset_pose(self, pose, cov_pose) -> None:
+        """Replace the pose estimate by one made without the landmarks (dead reckoning, when the images can no
+        longer be trusted): mean ``pose`` (3,), covariance ``cov_pose`` (3, 3), no correlation with the landmarks.
+        ``P`` stays PSD (block diagonal of two PSD blocks)."""
+        x = np.asarray(pose, dtype=float)
+        if x.shape != (3,) or not np.all(np.isfinite(x)):
+            raise InputError(expected("a finite pose (x, y, theta)", pose, where="reset_pose.pose"))
+        self._x[:3] = x
+        self._x[2] = wrap_angle(self._x[2])
+        self._P[:3, :3] = _covariance(cov_pose, 3, "reset_pose.cov_pose")
+        self._P[:3, 3:] = 0.0
+        self._P[3:, :3] = 0.0
+
     # ------------------------------------------------------------------ add
     def add_landmarks(self, new: Sequence[NewLandmark], cov_new, *, cov_pose_new=None,
                       frame: int | None = None, ids: Sequence[int] | None = None) -> list[int]:

@@ -351,6 +351,52 @@ class Localizer:
                 return factor, True
         return factor, False
 
+    def _relocalize(self, front: FrontEnd, cam_k: StereoCamera, pan: float):
+        """Relocalize from the walls fitted in this frame, when no landmark was found where the pose puts them.
+
+        Each wall fitted with its slope in agreement with the map (a wrong pan turns the walls; a kidnap or a
+        slip only shifts them) measures the position across it: its fitted offset ``a`` is ``−J δ`` for a pose
+        error ``δ`` (:func:`~stablemarks.landmarks.seen_wall_jacobian`, first row), with the fit's and the map's
+        variance. When the offsets together disagree with the pose beyond their 99.9 % χ² bound, a copy of the
+        filter has its position covariance widened by factors of 4 (up to ``health.max_inflation``) until they
+        fit as a typical sample and is updated with them (:meth:`JointEKF.update_pose`). The frame is modelled
+        again from that pose; only if a pattern of at least ``health.min_pattern`` landmarks is then associated
+        and jointly compatible is the copy kept. Returns ``(filter, factor, model, associations)`` or None."""
+        from .landmarks import fit_disagreements, seen_wall_jacobian
+
+        ekf, method = self.ekf, self.method
+        probe_model = method.model(front, cam_k, self.world_map, ekf.pose, ekf.cov_pose, self._probe_config)
+        if probe_model is None:
+            return None
+        cov_map = self.world_map.accuracy_cov
+        fits = [f for f in probe_model.fits
+                if f and fit_disagreements(cam_k, f, ekf.cov_pose, cov_map)[1] <= SLOPE_GATE_CHI2]
+        if not fits:
+            return None
+        H = np.array([-seen_wall_jacobian(cam_k, f)[0] for f in fits])
+        nu = np.array([float(f.a) for f in fits])
+        R = np.diag([float(f.cov_R[0, 0]) + float(cov_map[0, 0]) for f in fits])
+        Pxx = ekf.cov_pose
+
+        def m2(P):
+            return float(nu @ np.linalg.solve(H @ P @ H.T + R, nu))
+
+        if m2(Pxx) <= float(chdtri(len(nu), 0.001)):
+            return None  # the walls are where the pose puts them: not a kidnap
+        probe = ekf.copy()
+        factor = 1.0
+        while factor * 4.0 <= self.config.health.max_inflation and m2(probe.cov_pose) > len(nu):
+            probe.inflate_pose(4.0, position_only=True)
+            factor *= 4.0
+        probe.update_pose(nu, H, R)
+        model = method.model(front, cam_k, self.world_map, probe.pose, probe.cov_pose, self._probe_config)
+        report: dict = {}
+        assoc = method.associate(probe, front, model, pan, cam_k, report, self._max_incidence)
+        pattern = max(report.get("compatible") or [[]], key=len)
+        if len(pattern) < self.config.health.min_pattern:
+            return None
+        return probe, factor, model, assoc
+
     def _missed_landmarks(self, model: FrameLandmarks | None, assoc, pan: float, dropped: list[int]) -> list[int]:
         """Wall landmarks predicted in view on a wall modelled in this frame (a boundary found) but not
         associated: counted frame by frame; those missed ``ekf.max_missed`` times in a row are returned."""
@@ -498,6 +544,16 @@ class Localizer:
                     model, report = wide, wide_report
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
                 max(len(m) for m in report["incompatible"]) >= self.config.health.min_pattern
+            relocated = None
+            if not disagree and not turned and not assoc and model is not None and self.ekf.visible(pan):
+                # no landmark found and no pattern either: a kidnap that moved the walls beyond even the widened
+                # bands. The walls themselves, fitted where they are, say where the robot is (_relocalize).
+                relocated = self._relocalize(front, cam_k, pan)
+            if relocated is not None:
+                self.ekf, record.inflation, model, assoc = relocated
+                disagree = True
+                pan_suspect = edges_missing = False
+                edges_found = True
             if disagree and pan_suspect:
                 # a wrong pan turns the walls; only a pattern that a position shift makes fit is a kidnap
                 probe = self.ekf.copy()
@@ -506,7 +562,8 @@ class Localizer:
                 if disagree:
                     pan_suspect = edges_missing = False
                     edges_found = True
-            if disagree and self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
+            if relocated is None and disagree and \
+                    self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
                 record.inflation, _ = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
                 assoc = method.associate(self.ekf, front, model, pan, cam_k, max_incidence=self._max_incidence)
             assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma)

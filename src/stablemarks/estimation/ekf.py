@@ -549,6 +549,25 @@ class JointEKF:
         self._P[:3, 3:] = 0.0
         self._P[3:, :3] = 0.0
 
+    def update_pose(self, nu, H, R) -> float:
+        """One EKF update with a linear(ised) measurement of the pose alone: innovation ``nu`` (k,), Jacobian
+        ``H`` (k, 3) over ``(x, y, theta)``, noise ``R`` (k, k) (the walls fitted in a frame, when relocalizing
+        after a kidnap). Joseph form over the whole state, as :meth:`update`; returns the innovation's
+        Mahalanobis²."""
+        nu = np.asarray(nu, dtype=float).reshape(-1)
+        k = len(nu)
+        H = _matrix(H, (k, 3), "update_pose.H")
+        R = _matrix(R, (k, k), "update_pose.R")
+        PHt = self._P[:, :3] @ H.T
+        S = H @ PHt[:3] + R
+        S = 0.5 * (S + S.T)
+        sol = np.linalg.solve(S, np.column_stack([PHt.T, nu]))
+        K = sol[:, :-1].T
+        self._x += K @ nu
+        self._x[2] = wrap_angle(self._x[2])
+        _add_sym_rank(self._P, 0.5 * (K @ S) - PHt, K)
+        return float(nu @ sol[:, -1])
+
     # ------------------------------------------------------------------ add
     def add_landmarks(self, new: Sequence[NewLandmark], cov_new, *, cov_pose_new=None,
                       frame: int | None = None, ids: Sequence[int] | None = None) -> list[int]:

@@ -434,6 +434,16 @@ def _textured(sobel: np.ndarray, config: SADConfig) -> np.ndarray:
 # The hot loops index flat arrays with unsigned integers (no negative-index wraparound, no array
 # views per column), compute in the narrowest dtype (uint16 costs: 16 lanes per AVX2 operation)
 # and compile with error_model="numpy" (no zero-division branch), so that LLVM vectorizes them.
+#
+# Tried without gain (issue 13, measured against the kernel above in the same process, outputs identical on
+# the scenario frames and Middlebury): the left winner, its neighbours and its second-best cost taken in the
+# costs pass while the column is in the cache (0.96-1.00x: the costs pass grew by about what the
+# uniqueness pass lost, the winners pass did not shrink; probably the three dependent horizontal reductions
+# per column); the left second-best taken in the winners pass after the winner (1.03x); uint8 instead of
+# int16 prefiltered images for the column sums (1.00-1.04x); 512-bit vectors (numba compiled with
+# -prefer-256-bit: 1.2-1.25x slower); _PHASES 8 or 32 (1.25x / 1.07x slower). The right image's
+# passes (running minima along the diagonals) are what is left to gain from; computing the right image's
+# costs in their own layout (the same column sums, skewed) would double the column-sum and costs passes.
 # ---------------------------------------------------------------------------------------------
 
 _STEP = 32  # lane ranges are rounded to multiples of this (two AVX2 registers of uint16 costs)

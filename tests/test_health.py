@@ -221,7 +221,8 @@ def test_a_kidnap_beyond_the_widened_bands_is_relocalized_from_the_walls(room_se
     """The room, 0.5 m added to the odometry after frame 10, along the viewing direction: the walls ahead are
     found 0.35–0.38 m farther than the pose puts them, beyond even the widened bands, and no landmark or pattern is
     found (the warning came 9 frames late and the ATE after it was 0.56 m against dead reckoning's 0.59 m, final
-    NEES 64). The fitted walls' offsets relocalize a copy of the filter, confirmed by a pattern of landmarks."""
+    NEES 64). After two such frames the fitted walls' offsets relocalize a copy of the filter, confirmed by a
+    pattern of landmarks."""
     seq = _edit(room_seq, tmp_path / "kid", "y", lambda k, v: v + 0.5 if k > 10 else v)
     assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
     err = capsys.readouterr().err

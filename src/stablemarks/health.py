@@ -25,7 +25,7 @@ condition's name first):
     is found at all (a kidnap that moved the walls beyond even the widened bands), the walls fitted in the frame,
     their slopes in agreement with the map, relocalize a copy of the filter across them; it is kept, and the
     condition holds, only if a pattern of ``min_pattern`` landmarks then associates and fits
-    (``Localizer._relocalize``).
+    (``Localizer._relocalize``); this takes ``relocalize_frames`` such frames in a row.
 ``blind``
     no landmark observed for ``blind_frames`` frames in a row (while the filter holds landmarks).
 ``heading_drift``
@@ -65,6 +65,10 @@ class HealthConfig:
     search_inflation: float = 25.0
     """When the walls are not found where the prediction puts them, they are looked for again with the pose
     covariance widened by this factor (5 σ for 1 σ), before a slip or kidnap can be recognised."""
+    relocalize_frames: int = 2
+    """Frames in a row with no landmark found and the walls fitted away from the pose before the walls relocalize
+    it (``odometry_disagrees``): one such frame also happens on clean runs (the office, a turn: a wall fit 2 cm
+    off, and a pattern of three landmarks fitted the pose relocalized 7 cm away)."""
     drift_frames: int = 5
     """Frames over which the heading the images give is compared with the odometry's (``heading_drift``)."""
     drift_sigma: float = 4.0
@@ -74,7 +78,8 @@ class HealthConfig:
     24, 5 σ at 25."""
 
     def __post_init__(self) -> None:
-        for name in ("edges_frames", "nis_frames", "disagree_frames", "blind_frames", "min_pattern", "drift_frames"):
+        for name in ("edges_frames", "nis_frames", "disagree_frames", "blind_frames", "min_pattern", "drift_frames",
+                     "relocalize_frames"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(expected("a positive integer", v, where=f"health.{name}"))

@@ -284,6 +284,8 @@ class Localizer:
         odometry's heading variance summed since the start [rad²]): the ``heading_drift`` test."""
         self._odo_heading_var = 0.0
         self._missed: dict[int, int] = {}
+        self._lost_frames = 0
+        """Frames in a row with no landmark found and the walls fitted away from the pose (:meth:`_relocalize`)."""
         self._turn_ref: _Turn | None = None
         """The last turn of the walls together while ``edges_not_found`` may hold (see :meth:`step`)."""
         self.health = HealthMonitor(self.config.health)
@@ -351,39 +353,48 @@ class Localizer:
                 return factor, True
         return factor, False
 
-    def _relocalize(self, front: FrontEnd, cam_k: StereoCamera, pan: float):
-        """Relocalize from the walls fitted in this frame, when no landmark was found where the pose puts them.
+    def _walls_offsets(self, front: FrontEnd, cam_k: StereoCamera):
+        """The walls fitted in this frame as a measurement of the position across them, when together they
+        disagree with the pose beyond their 99.9 % χ² bound: ``(nu, H, R)``, else None.
 
         Each wall fitted with its slope in agreement with the map (a wrong pan turns the walls; a kidnap or a
         slip only shifts them) measures the position across it: its fitted offset ``a`` is ``−J δ`` for a pose
         error ``δ`` (:func:`~stablemarks.landmarks.seen_wall_jacobian`, first row), with the fit's and the map's
-        variance. When the offsets together disagree with the pose beyond their 99.9 % χ² bound, a copy of the
-        filter has its position covariance widened by factors of 4 (up to ``health.max_inflation``) until they
-        fit as a typical sample and is updated with them (:meth:`JointEKF.update_pose`). The frame is modelled
-        again from that pose; only if a pattern of at least ``health.min_pattern`` landmarks is then associated
-        and jointly compatible is the copy kept. Returns ``(filter, factor, model, associations)`` or None."""
+        variance."""
         from .landmarks import fit_disagreements, seen_wall_jacobian
 
-        ekf, method = self.ekf, self.method
-        probe_model = method.model(front, cam_k, self.world_map, ekf.pose, ekf.cov_pose, self._probe_config)
-        if probe_model is None:
+        ekf = self.ekf
+        model = self.method.model(front, cam_k, self.world_map, ekf.pose, ekf.cov_pose, self._probe_config)
+        if model is None:
             return None
         cov_map = self.world_map.accuracy_cov
-        fits = [f for f in probe_model.fits
-                if f and fit_disagreements(cam_k, f, ekf.cov_pose, cov_map)[1] <= SLOPE_GATE_CHI2]
+        fits = [f for f in model.fits if f and fit_disagreements(cam_k, f, ekf.cov_pose, cov_map)[1] <= SLOPE_GATE_CHI2]
         if not fits:
             return None
         H = np.array([-seen_wall_jacobian(cam_k, f)[0] for f in fits])
         nu = np.array([float(f.a) for f in fits])
         R = np.diag([float(f.cov_R[0, 0]) + float(cov_map[0, 0]) for f in fits])
-        Pxx = ekf.cov_pose
+        S = H @ ekf.cov_pose @ H.T + R
+        if float(nu @ np.linalg.solve(S, nu)) <= float(chdtri(len(nu), 0.001)):
+            return None  # the walls are where the pose puts them: not a kidnap
+        return nu, H, R
+
+    def _relocalize(self, walls, front: FrontEnd, cam_k: StereoCamera, pan: float):
+        """Relocalize from the walls fitted in this frame (:meth:`_walls_offsets`), when no landmark was found
+        where the pose puts them in ``health.relocalize_frames`` frames in a row while the walls disagreed with it.
+
+        A copy of the filter has its position covariance widened by factors of 4 (up to ``health.max_inflation``)
+        until the walls' offsets fit as a typical sample and is updated with them (:meth:`JointEKF.update_pose`).
+        The frame is modelled again from that pose; only if a pattern of at least ``health.min_pattern``
+        landmarks is then associated and jointly compatible is the copy kept. Returns ``(filter, factor, model,
+        associations)`` or None."""
+        method = self.method
+        nu, H, R = walls
 
         def m2(P):
             return float(nu @ np.linalg.solve(H @ P @ H.T + R, nu))
 
-        if m2(Pxx) <= float(chdtri(len(nu), 0.001)):
-            return None  # the walls are where the pose puts them: not a kidnap
-        probe = ekf.copy()
+        probe = self.ekf.copy()
         factor = 1.0
         while factor * 4.0 <= self.config.health.max_inflation and m2(probe.cov_pose) > len(nu):
             probe.inflate_pose(4.0, position_only=True)
@@ -544,11 +555,15 @@ class Localizer:
                     model, report = wide, wide_report
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
                 max(len(m) for m in report["incompatible"]) >= self.config.health.min_pattern
-            relocated = None
+            relocated = walls = None
             if not disagree and not turned and not assoc and model is not None and self.ekf.visible(pan):
                 # no landmark found and no pattern either: a kidnap that moved the walls beyond even the widened
-                # bands. The walls themselves, fitted where they are, say where the robot is (_relocalize).
-                relocated = self._relocalize(front, cam_k, pan)
+                # bands? The walls themselves, fitted where they are, say where the robot is (_relocalize), once
+                # they have disagreed with the pose in health.relocalize_frames frames in a row.
+                walls = self._walls_offsets(front, cam_k)
+            self._lost_frames = self._lost_frames + 1 if walls is not None else 0
+            if walls is not None and self._lost_frames >= self.config.health.relocalize_frames:
+                relocated = self._relocalize(walls, front, cam_k, pan)
             if relocated is not None:
                 self.ekf, record.inflation, model, assoc = relocated
                 disagree = True

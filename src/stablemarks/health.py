@@ -101,7 +101,8 @@ MESSAGES = {
     "blind": "blind: no landmark observed for {n} frames",
     "heading_drift": "heading_drift: the images turned the heading {drift:+.1f}° from the odometry's over {w} frames "
                      "({z:.1f} σ): the head's pan may be wrong or changing unrecorded (a bag's pan comes from "
-                     "`pan_topic`, a sequence folder's from the pan column of frames.csv); the estimate is dead "
+                     "`pan_topic`, a sequence folder's from the pan column of frames.csv), or the odometry's heading "
+                     "noise (odometry.rot_per_m_deg, odometry.rot_per_rad) is set too small; the estimate is dead "
                      "reckoning from here on and nothing is updated from the images",
 }
 

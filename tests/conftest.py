@@ -58,3 +58,19 @@ def scenario_frames():
             out.append((name, k, f.left, f.right, run.scenario.camera.with_pan(run.pans[k]), run.scenario.map,
                         run.poses[k].as_array()))
     return out
+
+
+@pytest.fixture(scope="session")
+def scenario_models(scenario_frames):
+    """The landmark model of every frame of :func:`scenario_frames` (the pipeline in regions, from the true pose
+    with the prior :data:`COV_PRIOR`): ``(name, k, front end, model)``."""
+    from stablemarks.config import Config
+    from stablemarks.pipeline import plane_regions, run_front_end, select_landmarks
+
+    config = Config()
+    out = []
+    for name, k, left, right, camera, world_map, X in scenario_frames:
+        reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
+        front = run_front_end(left, right, config, reg)
+        out.append((name, k, front, select_landmarks(front, camera, world_map, X, COV_PRIOR, config)))
+    return out

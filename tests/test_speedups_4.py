@@ -7,25 +7,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
 
 from stablemarks.config import Config
 from stablemarks.landmarks import _boundary_columns
-from stablemarks.pipeline import plane_regions, run_front_end, select_landmarks
 
 COV_PRIOR = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
-
-
-@pytest.fixture(scope="module")
-def models(scenario_frames):
-    """The landmark model of every frame (the pipeline in regions, from the true pose)."""
-    config = Config()
-    out = []
-    for name, k, left, right, camera, world_map, X in scenario_frames:
-        reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
-        front = run_front_end(left, right, config, reg)
-        out.append((name, k, front, select_landmarks(front, camera, world_map, X, COV_PRIOR, config)))
-    return out
 
 
 # ------------------------------------------------------------------ the region's end per row
@@ -81,11 +67,11 @@ def test_boundary_columns_equal_the_array_reference_on_random_regions():
                               boundary_columns_reference(region, lo, hi, outward, hole), (trial, outward, hole))
 
 
-def test_boundary_columns_equal_the_array_reference_on_plane_regions(models):
+def test_boundary_columns_equal_the_array_reference_on_plane_regions(scenario_models):
     """The fitted planes' regions of the simulated frames, every edge's search window, both directions."""
     config = Config()
     n = 0
-    for name, k, _front, model in models:
+    for name, k, _front, model in scenario_models:
         for fit in (f for f in model.fits if f):
             for e in fit.prediction.edges.values():
                 if not np.all(np.isfinite(e.u)):
@@ -122,7 +108,7 @@ def associate_joint_reference(ekf, measured, pan=0.0, candidates=None, extra_cos
     return sorted(chosen, key=lambda q: q[1])
 
 
-def test_associate_joint_equals_the_reference(scenario_frames, models):
+def test_associate_joint_equals_the_reference(scenario_frames, scenario_models):
     """The filter after each frame (a wall landmark per selected candidate), its pose moved a little and its
     measurements shifted and shuffled so that pairs compete: the same pairs as the former association, and the
     trial sets' joint NIS from the projections made once equal :meth:`JointEKF.joint_nis` bit for bit."""
@@ -131,7 +117,8 @@ def test_associate_joint_equals_the_reference(scenario_frames, models):
     config = Config()
     rng = np.random.default_rng(7)
     compared = 0
-    for (name, k, _l, _r, camera, world_map, X), (_, _, front, model) in zip(scenario_frames, models, strict=True):
+    for (name, k, _l, _r, camera, world_map, X), (_, _, front, model) in zip(scenario_frames, scenario_models,
+                                                                             strict=True):
         if not model.selected:
             continue
         pairs = front.kept_pairs

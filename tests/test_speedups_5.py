@@ -7,23 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stablemarks.config import Config
 from stablemarks.landmarks import beside_nearer, beside_nearer_sides
-from stablemarks.pipeline import plane_regions, run_front_end, select_landmarks
 
 COV_PRIOR = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
-
-
-@pytest.fixture(scope="module")
-def models(scenario_frames):
-    """The landmark model of every frame (the pipeline in regions, from the true pose)."""
-    config = Config()
-    out = []
-    for name, k, left, right, camera, world_map, X in scenario_frames:
-        reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
-        front = run_front_end(left, right, config, reg)
-        out.append((name, k, front, select_landmarks(front, camera, world_map, X, COV_PRIOR, config)))
-    return out
 
 
 # ------------------------------------------------------------------ beside something nearer
@@ -53,13 +39,13 @@ def beside_nearer_reference(fit, disparity_left, c, slope, window_px, fraction, 
     return 0
 
 
-def test_beside_nearer_equals_the_reference(models):
+def test_beside_nearer_equals_the_reference(scenario_models):
     """Every candidate of every fitted plane (selected or not), with its own slope and others, several windows
     and fractions, on the frames' disparity images and on the same images with a nearer patch painted beside
     the lines: the same side, one line at a time and all lines at once."""
     rng = np.random.default_rng(5)
     sides = {-1: 0, 0: 0, 1: 0}
-    for name, k, front, model in models:
+    for name, k, front, model in scenario_models:
         slopes = front.left_segments.slope[front.kept_pairs.left_index]
         for plane in model.planes:
             fit, cands = plane.fit, plane.candidates
@@ -131,13 +117,13 @@ def test_block_boundary_columns_equal_the_full_region():
                     assert g.dtype == wnt.dtype and np.array_equal(g, wnt), (trial, outward, hole)
 
 
-def test_right_block_is_the_right_region(models):
+def test_right_block_is_the_right_region(scenario_models):
     """The right-image region of every fitted plane's edge windows (and of the whole image), as a block: the
     same mask as :func:`right_region`, nothing outside the block."""
     from stablemarks.landmarks import _right_block, right_region
 
     n = 0
-    for _name, _k, front, model in models:
+    for _name, _k, front, model in scenario_models:
         disp_r = front.disparity.right
         for fit in (f for f in model.fits if f):
             pred = fit.prediction
@@ -198,14 +184,14 @@ def test_crossings_equal_the_reference(scenario_frames):
 
 
 # ------------------------------------------------------------------ the candidates' decisions
-def test_fast_replace_is_dataclasses_replace(models):
+def test_fast_replace_is_dataclasses_replace(scenario_models):
     """:func:`landmarks._replace` (the selection's decisions on a candidate) gives the object
     ``dataclasses.replace`` gives: equal field by field, arrays the same objects, a Candidate."""
     import dataclasses
 
     from stablemarks.landmarks import Candidate, _replace
 
-    cands = [c for *_, model in models for c in model.candidates]
+    cands = [c for *_, model in scenario_models for c in model.candidates]
     assert len(cands) > 50
     for c in cands:
         for kw in ({"selected": False, "reason": "beside something nearer"}, {"selected": True, "reason": ""}):
@@ -255,6 +241,7 @@ def test_nearer_silhouettes_equal_the_reference(scenario_frames):
             for plane in world_map:
                 for step in (np.inf, 0.7):
                     got = nearer_silhouettes(camera, Xt, COV_PRIOR, world_map, plane, max_step_px=step)
-                    assert got == nearer_silhouettes_reference(camera, Xt, COV_PRIOR, world_map, plane, max_step_px=step)
+                    want = nearer_silhouettes_reference(camera, Xt, COV_PRIOR, world_map, plane, max_step_px=step)
+                    assert got == want
                     found += len(got)
     assert found > 20

@@ -36,7 +36,7 @@ from .estimation import JointEKF, LandmarkEstimate, motion
 from .estimation.association import lone_gate_px
 from .geometry import SE2, StereoCamera
 from .health import HealthMonitor
-from .landmarks import SLOPE_GATE_CHI2, common_turn
+from .landmarks import SLOPE_GATE_CHI2, common_turn, fit_disagreements, seen_wall_jacobian
 from .maps import Map
 from .methods import Entered, Method, method_named
 from .pipeline import FrameLandmarks, FrontEnd, Regions, check_pair, disparity_limits, plane_regions, run_front_end
@@ -361,8 +361,6 @@ class Localizer:
         slip only shifts them) measures the position across it: its fitted offset ``a`` is ``−J δ`` for a pose
         error ``δ`` (:func:`~stablemarks.landmarks.seen_wall_jacobian`, first row), with the fit's and the map's
         variance."""
-        from .landmarks import fit_disagreements, seen_wall_jacobian
-
         ekf = self.ekf
         model = self.method.model(front, cam_k, self.world_map, ekf.pose, ekf.cov_pose, self._probe_config)
         if model is None:

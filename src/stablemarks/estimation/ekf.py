@@ -558,15 +558,25 @@ class JointEKF:
         k = len(nu)
         H = _matrix(H, (k, 3), "update_pose.H")
         R = _matrix(R, (k, k), "update_pose.R")
-        PHt = self._P[:, :3] @ H.T
-        S = H @ PHt[:3] + R
-        S = 0.5 * (S + S.T)
-        sol = np.linalg.solve(S, np.column_stack([PHt.T, nu]))
+        PHt, S, sol = self._gain(np.arange(3), H, nu, R)
         K = sol[:, :-1].T
         self._x += K @ nu
         self._x[2] = wrap_angle(self._x[2])
         _add_sym_rank(self._P, 0.5 * (K @ S) - PHt, K)
         return float(nu @ sol[:, -1])
+
+    def _gain(self, idx: np.ndarray, H: np.ndarray, nu: np.ndarray, R: np.ndarray | None = None):
+        """The Kalman gain's pieces for a measurement with Jacobian ``H`` over the state indices ``idx``:
+        ``PHt = P[:, idx] Hᵀ``, ``S = H P[idx, idx] Hᵀ + R`` (symmetrised; ``R`` None: ``σ_img² I``, the line
+        observations of :meth:`update`) and ``S⁻¹ [PHtᵀ | ν]`` by one solve (the gain is its transposed left part)."""
+        PHt = self._P[:, idx] @ H.T
+        S = H @ PHt[idx]
+        S = 0.5 * (S + S.T)
+        if R is None:
+            S[np.diag_indices(len(S))] += self._var_img
+        else:
+            S = S + R
+        return PHt, S, np.linalg.solve(S, np.column_stack([PHt.T, nu]))
 
     # ------------------------------------------------------------------ add
     def add_landmarks(self, new: Sequence[NewLandmark], cov_new, *, cov_pose_new=None,
@@ -910,11 +920,7 @@ class JointEKF:
             if it == 0:
                 nu0 = nu
             with _one_blas_thread(len(self._x)):
-                PHt = self._P[:, idx] @ H.T
-                S = H @ PHt[idx]
-                S = 0.5 * (S + S.T)
-                S[np.diag_indices(2 * m)] += self._var_img  # + R
-                sol = np.linalg.solve(S, np.column_stack([PHt.T, nu]))  # S⁻¹ [PHtᵀ | ν]
+                PHt, S, sol = self._gain(idx, H, nu)
                 K = sol[:, :-1].T
                 x_i = x0 + K @ nu
         self._x = x_i

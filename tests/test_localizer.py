@@ -8,6 +8,7 @@ import stablemarks as sm
 from stablemarks.cli import main
 from stablemarks.frames import Frame, FrameSource, SteerableSource
 from stablemarks.io.trajectory import read_tum
+from stablemarks.localizer import FOUND_PRIOR
 from stablemarks.sim.export import write_simulated_sequence
 from stablemarks.sim.run import simulate_run
 from stablemarks.sim.source import SimulatedSource
@@ -136,3 +137,29 @@ def test_a_lone_association_among_several_landmarks_in_view_is_not_used(lab_seq,
     est = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
     assert est.record.associated == [] and est.record.observed == []
     assert any("only one of the" in w for w in est.record.warnings)
+
+
+@pytest.mark.parametrize("few_found_p, used", [(0.0, True), (0.999, False)])
+def test_a_small_pattern_among_many_landmarks_in_view_is_used_only_if_likely(lab_seq, monkeypatch, few_found_p, used):
+    """Two landmarks found of many predicted in view: after a turn's odometry error, two neighbouring lines can
+    fit two landmarks together (loop: 2 of 8 found, the heading held 4.8° off). The pair is not used when finding
+    so few is less likely than ``health.few_found_p`` at the run's rate of finding landmarks in view."""
+    seq = sm.open_sequence(lab_seq)
+    frames = list(seq)
+    config = sm.Config().with_overrides({"health": {"few_found_p": few_found_p}})
+    loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=config)
+    for f in frames[:-1]:
+        loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
+    f = frames[-1]
+    assert len(loc.ekf.visible(f.pan)) >= 3
+    found, missed = loc._found
+    assert found > FOUND_PRIOR[0]  # the run's own rate, not only the prior
+    real = loc.method.associate
+
+    def first_two(*args, **kwargs):
+        return real(*args, **kwargs)[:2]
+
+    monkeypatch.setattr(loc.method, "associate", first_two)
+    est = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
+    assert (len(est.record.observed) == 2) is used
+    assert any("landmarks in view were associated" in w for w in est.record.warnings) is not used

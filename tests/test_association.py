@@ -281,3 +281,15 @@ def test_a_walls_pattern_that_fits_at_two_offsets_is_not_taken_when_the_pose_is_
             assert got == list(zip(ids, range(4), strict=True)) and not report["ambiguous"]
         else:
             assert got == [] and len(report["ambiguous"]) == 1
+
+
+def test_a_lone_association_reports_its_gate_only_when_alone():
+    from stablemarks.estimation.association import lone_gate_px
+
+    tight = _ekf(s=(0.9, 1.3), polarity=(0, 0))
+    wide = _ekf(s=(0.9, 1.3), polarity=(0, 0), ekf=JointEKF(CAMERA, X0, WIDE))
+    a, b = tight.landmark_ids
+    assert lone_gate_px(tight, [], 0.0) == 0.0
+    assert lone_gate_px(tight, [(a, 0), (b, 1)], 0.0) == 0.0  # two can be checked against each other
+    # at 4 m a 6° heading σ spans tens of pixels, a 0.5° one a few
+    assert lone_gate_px(wide, [(a, 0)], 0.0) > 50.0 > 30.0 > lone_gate_px(tight, [(a, 0)], 0.0)

@@ -84,7 +84,9 @@ class NoiseConfig:
     99 % lie within 1.6 px, but the office has mis-snaps of 13–23 px (0.1 m) that no Gaussian σ covers; 2 px is
     cautious for most edges (their errors are 0.2 σ). 0.75 px was tried on all six scenarios: pose NEES closer to
     its bounds on lab (1.3 → 1.5) and room (2.4 → 2.8), but one office trial's recovery after a blind stretch then
-    failed (ATE 0.22 m), so the default stays."""
+    failed (ATE 0.22 m). Tried again once the head no longer looked at bare walls for 20 frames (the free-edge
+    rule of :func:`~stablemarks.motion.look_at_free_edges`), on office and hall with 8 trials each: office pose
+    NEES 3.9 → 5.9 and ATE 12 → 22 mm, hall NEES 1.7 → 2.4 and ATE 21 → 26 mm. The default stays."""
     free_boundary_px: float | None = 8.0
     """The same when no segment marks the edge and the boundary is the planar region's border itself: block
     matching moves a depth edge by about half its window, mostly inward (``calibrate-noise``: 7.4 px on the

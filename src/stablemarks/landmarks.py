@@ -471,6 +471,14 @@ def search_boundary(
             if not right_found:
                 var_b[1] = var_b[0]
                 right_found = True
+    if right_found and not snapped:
+        # The two borders were found apart. Block matching moves a depth edge in 3-D (both images the same way),
+        # so the pair keeps the wall's disparity; a right border more than half a window from it is another
+        # edge (hall, a door jamb at 9 m: the right border 10–26 px off, the left within 1 px; the edge came out
+        # 0.15 m along the wall and every feature modelled from it with it).
+        d_here, _ = pred.disparity_at(u_b[0])
+        if abs(u_b[0] - u_b[1] - float(d_here)) > w / 2.0:
+            right_found = False
     if not right_found:
         # right image unusable: take the column where the fitted plane puts the left boundary
         d_here, _ = pred.disparity_at(u_b[0])

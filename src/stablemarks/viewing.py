@@ -91,25 +91,28 @@ def choose_pan(config: PanConfig, world_map: Map, camera: StereoCamera, X, previ
     a, b = max(lo, start - reach), min(hi, start + reach)
     grid = np.linspace(a, b, config.candidates)
     pans = np.unique(np.concatenate([grid, [np.clip(paper, a, b), np.clip(start, a, b)]]))
-    scores = [expected_information(ekf, world_map, camera, X, p, config.new_edge_value) for p in pans]
+    scores = [expected_information(ekf, world_map, camera, X, p, config.new_edge_value, max_incidence)
+              for p in pans]
     best = float(pans[int(np.argmax(scores))])
     # ties (nothing to gain anywhere): the paper's choice
     return best if max(scores) > scores[int(np.argmin(np.abs(pans - np.clip(paper, a, b))))] + 1e-9 else \
         float(np.clip(paper, a, b))
 
 
-def expected_information(ekf, world_map: Map, camera: StereoCamera, X, pan: float, new_edge_value: float) -> float:
+def expected_information(ekf, world_map: Map, camera: StereoCamera, X, pan: float, new_edge_value: float,
+                         max_incidence: float | None = None) -> float:
     """What a frame taken at pose ``X`` with the head at ``pan`` promises [nat]: the sum of the
     ``ekf.config.max_updates_per_frame`` largest expected information gains about the pose
     (:meth:`JointEKF.information_gain`, each ``½ log det P_XX / det P_XX|z``) of the landmarks predicted inside
     both images, plus ``new_edge_value`` for every free edge of a reference plane in view (in the image, on its
-    wall's visible side, not hidden by another wall) whose wall holds no landmark."""
+    wall's visible side, not hidden by another wall) whose wall holds no landmark. With ``max_incidence`` [rad],
+    landmarks and free edges on walls seen more obliquely count for nothing (they are neither associated nor
+    modelled: :meth:`JointEKF.visible`, ``landmarks.max_incidence_deg``)."""
     total = 0.0
     ids = ekf.landmark_ids
     if ids:
         with ekf.linearised_at(X):
-            pred = ekf.predict_observation(ids, pan)
-            seen = [int(i) for i in pred.ids[pred.in_view]]
+            seen = [int(i) for i in ekf.visible(pan, max_incidence)]
             if seen:
                 gains = np.sort(ekf.information_gain(seen, pan))[::-1]
                 total += float(np.sum(gains[: ekf.config.max_updates_per_frame]))
@@ -123,6 +126,10 @@ def expected_information(ekf, world_map: Map, camera: StereoCamera, X, pan: floa
                 continue
             for e in plane.free_edges:
                 p = plane.edge(e)
+                rel = p - centre
+                if max_incidence is not None and \
+                        abs(float(plane.normal @ rel)) < float(np.hypot(*rel)) * math.cos(max_incidence):
+                    continue
                 uv = cam.project_columns(X, p)
                 if not (np.all(np.isfinite(uv)) and np.all(cam.in_image(uv, 10.0))):
                     continue

@@ -113,6 +113,16 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     return sorted(chosen, key=lambda q: q[1])
 
 
+def lone_gate_px(ekf: JointEKF, pairs: list[tuple[int, int]], pan: float) -> float:
+    """Half-width [px] of the 3σ gate of the left column of a frame's only association (0 when ``pairs`` holds
+    none or several). A single pair cannot be checked against anything (a 2-D measurement, a 3-D pose: joint
+    compatibility accepts whatever lies in the gate), so the wider that gate, the likelier it holds a neighbour
+    of a line that was not found."""
+    if len(pairs) != 1:
+        return 0.0
+    return 3.0 * float(np.sqrt(ekf.predict_observation([pairs[0][0]], pan).S[0, 0, 0]))
+
+
 def _conflict(a: list[tuple[int, int]], b: list[tuple[int, int]]) -> bool:
     """Whether two matchings pair one landmark with different lines, or one line with different landmarks."""
     la, pa = dict(a), {j: i for i, j in a}

@@ -550,3 +550,37 @@ def test_joint_association_refuses_a_shifted_assignment():
     assert ekf.joint_nis(pairs, measured) < 1.0
     shifted = [(i + 1, i) for i in range(4)]
     assert ekf.joint_nis(shifted, measured) > ekf.joint_nis(pairs, measured)
+
+
+# ------------------------------------------------------- known points (free edges of the map)
+@pytest.mark.parametrize("seed", range(3))
+def test_known_point_update_equals_the_dense_reference(seed):
+    rng = np.random.default_rng(seed)
+    ekf, _ = random_filter(rng)
+    dense = DenseEKF(ekf.state, ekf.cov)
+    pan = rng.uniform(-0.2, 0.2)
+    pts = np.array([WALL.edge("p1"), BOARD.edge("p2")])
+    R = np.stack([random_spd(rng, 2, 0.5), random_spd(rng, 2, 0.3)])
+    C = np.stack([np.diag([1e-4, 4e-4]), np.diag([2e-4, 1e-4])])
+    uv, J_I_X, J_I_p = CAM.with_pan(pan).project_columns(ekf.pose, pts, jacobians=True)
+    z = uv + rng.normal(scale=1.0, size=uv.shape)
+    before = ekf.known_point_nis(pts, z, R, pan, cov_points=C)
+    res = ekf.update_known_points(pts, z, R, pan, cov_points=C)
+    H = np.zeros((4, len(dense.x)))
+    H[:, :3] = J_I_X.reshape(4, 3)
+    Rfull = np.zeros((4, 4))
+    for j in range(2):
+        Rfull[2 * j:2 * j + 2, 2 * j:2 * j + 2] = R[j] + J_I_p[j] @ C[j] @ J_I_p[j].T
+    dense.update(z.ravel(), uv.ravel(), H, Rfull)
+    np.testing.assert_allclose(ekf.state, dense.x, atol=1e-10)
+    np.testing.assert_allclose(ekf.cov, dense.P, atol=1e-10)
+    np.testing.assert_array_equal(ekf.cov, ekf.cov.T)
+    assert_psd(ekf.cov)
+    np.testing.assert_allclose(res.nis, before, rtol=1e-9)
+
+
+def test_known_point_update_rejects_bad_input():
+    ekf = JointEKF(CAM, X0, np.diag([0.01, 0.01, 1e-3]))
+    with pytest.raises(InputError, match="update_known_points"):
+        ekf.update_known_points([WALL.edge("p1")], [[300.0, 280.0]], np.eye(2))  # one (2, 2), not (1, 2, 2)
+    assert ekf.update_known_points(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2))).dof == 0

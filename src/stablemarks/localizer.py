@@ -107,6 +107,9 @@ class FrameRecord:
     landmark_priors: list[tuple[list[int], list[float], np.ndarray]] = field(default_factory=list)
     """Landmarks entered in this frame, in groups: ``(ids, initial state values, joint covariance)``; the
     cross-covariance with the pose is zero for wall landmarks (DESIGN §4)."""
+    edge_measurements: list[tuple[str, str, float, float, list[list[float]]]] = field(default_factory=list)
+    """Free edges found in this frame that updated the pose (``ekf.edge_updates``): ``(plane id, edge, u_l, u_r,
+    covariance of (u_l, u_r) [px²])``; the map's accuracy is added to it."""
 
     def to_dict(self) -> dict:
         """JSON-ready: arrays as lists."""
@@ -451,6 +454,43 @@ class Localizer:
         z = (d1 - d0) / math.sqrt(q1 - q0 + (s0 + s1) ** 2)
         return (math.degrees(d1 - d0), z) if abs(z) > self.config.health.drift_sigma else None
 
+    def _update_edges(self, model: FrameLandmarks, entered: Entered, measurements, pan: float) -> list:
+        """Update the pose with the free edges found again in this frame (``ekf.edge_updates``).
+
+        A snapped boundary (moved onto its outermost member segment pair, Sec 3.2) is the image of the map's
+        free edge, a point the map gives: its columns say where the robot is along that wall. Left out: the
+        boundaries new landmarks were modelled from in this frame (their positions along the wall are measured
+        from it: used twice, the pose and those landmarks would seem independent), boundaries whose line updated
+        the filter as a landmark in this frame (the same pixels), the region's own border when no segment marks
+        the edge (block matching moves it inward by about half a window: a bias, not noise), and an edge whose
+        NIS lies outside the association gate. The map's accuracy is added to the noise.
+        """
+        used = {(c.plane_id, c.edge) for c in entered.candidates if c is not None}
+        lines = np.array([ul for _, ul, _ in measurements])
+        pts, z, R, names = [], [], [], []
+        for pm in model.planes:
+            if pm.gated:
+                continue
+            for b in pm.boundaries:
+                if not b.snapped or b.cov_uv is None or (b.plane_id, b.edge) in used:
+                    continue
+                if len(lines) and np.min(np.abs(lines - b.u[0])) < 1.0:
+                    continue
+                pts.append(self.world_map[b.plane_id].edge(b.edge))
+                z.append(np.asarray(b.u, dtype=float))
+                R.append(np.asarray(b.cov_uv, dtype=float))
+                names.append((b.plane_id, b.edge))
+        if not pts:
+            return []
+        cov_map = np.broadcast_to(self.world_map.accuracy_cov, (len(pts), 2, 2))
+        nis = self.ekf.known_point_nis(pts, z, R, pan, cov_points=cov_map)
+        keep = np.flatnonzero(nis <= self.config.ekf.gate)
+        if not len(keep):
+            return []
+        self.ekf.update_known_points(np.array(pts)[keep], np.array(z)[keep], np.array(R)[keep], pan,
+                                     cov_points=cov_map[keep])
+        return [(names[i][0], names[i][1], float(z[i][0]), float(z[i][1]), np.asarray(R[i]).tolist()) for i in keep]
+
     def _increment(self, odometry) -> tuple[SE2 | None, np.ndarray | None]:
         if odometry is None:
             return None, None
@@ -646,6 +686,8 @@ class Localizer:
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
                                        self.config)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
+            if not pan_suspect and record.inflation == 1.0 and self.config.ekf.edge_updates and model is not None:
+                record.edge_measurements = self._update_edges(model, entered, record.measurements, pan)
             timings["select"] = time.perf_counter() - t3
         drift = self._heading_drift() if method.uses_vision and self.health.drift is None else None
         if drift is not None:

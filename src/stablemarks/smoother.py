@@ -169,6 +169,31 @@ def observation_factor(pose_key: int, landmark_key: int, camera: StereoCamera, p
     return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(2, sigma_img), [pose_key, landmark_key], error)
 
 
+def edge_factor(pose_key: int, camera: StereoCamera, point, measured, cov_uv, cov_point, X_lin):
+    """A gtsam ``CustomFactor`` on the ``Pose2`` at ``pose_key``: a free edge of the map at ``point`` (2,) seen at
+    ``measured`` ``(u_l, u_r)`` [px] (the filter's ``ekf.edge_updates``), noise ``cov_uv`` plus the map's
+    accuracy ``cov_point`` projected at the pose ``X_lin`` (as the filter took it)."""
+    gtsam = _gtsam()
+    z = np.asarray(measured, dtype=float).reshape(2)
+    p = np.asarray(point, dtype=float).reshape(1, 2)
+    _, _, J_p = camera.project_columns(np.asarray(X_lin, dtype=float), p, jacobians=True)
+    cov = np.asarray(cov_uv, dtype=float) + J_p[0] @ np.asarray(cov_point, dtype=float) @ J_p[0].T
+
+    def error(this, values, H):
+        pose = values.atPose2(pose_key)
+        X = np.array([pose.x(), pose.y(), pose.theta()])
+        uv, J_I_X, _ = camera.project_columns(X, p, jacobians=True)
+        if not np.all(np.isfinite(uv)):
+            if H is not None:
+                H[0] = np.zeros((2, 3))
+            return np.full(2, BEHIND_CAMERA_ERROR)
+        if H is not None:
+            H[0] = J_I_X[0] @ _pose_to_world(X[2])
+        return uv[0] - z
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(0.5 * (cov + cov.T)), [pose_key], error)
+
+
 def group_prior_factor(keys, values, cov):
     """A gtsam ``CustomFactor`` on the 1-vectors ``s`` at ``keys`` (n,): the joint prior ``s ~ N(values, cov)``
     of landmarks entered together (cov (n, n), full: their shared boundary error, DESIGN §4)."""
@@ -243,6 +268,9 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
             for lid in ids:
                 wall(int(lid))
             graph.add(group_prior_factor([L(int(i)) for i in ids], values, cov))
+        for plane_id, edge, u_l, u_r, cov_uv in getattr(rec, "edge_measurements", []):
+            graph.add(edge_factor(X(k), cam_k, result.world_map[plane_id].edge(edge), (u_l, u_r), cov_uv,
+                                  result.world_map.accuracy_cov, rec.pose))
 
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(int(max_iterations))

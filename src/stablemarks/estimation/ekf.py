@@ -112,6 +112,10 @@ class EKFConfig:
     recheck_sigma : an associated wall landmark whose along-wall position disagrees with the frame's own model
         of the same line by more than this many σ (both variances) is dropped and entered again from the
         frame's model: an error made from afar is corrected, not locked in.
+    edge_updates : update the pose with the free edges found in the frame (:meth:`JointEKF.update_known_points`):
+        a snapped boundary is the image of a point the map gives, so every frame that finds one again says
+        where the robot is along that wall. The paper uses a boundary only once, when the landmarks are modelled
+        from it; then the pose along a wall is known only as well as the first boundary was found.
     """
 
     gate_probability: float = 0.99
@@ -120,8 +124,11 @@ class EKFConfig:
     max_missed: int = 5
     recheck_sigma: float = 3.0
     landmark_sigma_floor: float = 0.005
+    edge_updates: bool = True
 
     def __post_init__(self) -> None:
+        if not isinstance(self.edge_updates, bool):
+            raise ConfigError(expected("true or false", self.edge_updates, where="ekf.edge_updates"))
         if not 0.0 < self.gate_probability < 1.0:
             raise ConfigError(expected("a probability in (0, 1)", self.gate_probability,
                                        where="ekf.gate_probability"))
@@ -944,6 +951,71 @@ class JointEKF:
                 if self._tracks[int(self._ids[r])].kind == "wall" and self._P[i, i] < floor:
                     self._P[i, i] = floor  # adds floor − P_ii ≥ 0 on the diagonal: P stays PSD
         return UpdateResult(self._ids[rows].copy(), nu2, nis, nis_total)
+
+    def update_known_points(self, points, measured, cov_measured, pan: float = 0.0, *,
+                            cov_points=None) -> UpdateResult:
+        """Update the pose with the observed columns of points whose map positions are known (not in the state).
+
+        ``points`` (m, 2) [m] in the map frame, ``measured`` (m, 2) their ``(u_l, u_r)`` [px], ``cov_measured``
+        (m, 2, 2) the measurement covariances [px²], ``cov_points`` (m, 2, 2) the points' own uncertainty in the
+        map [m²] (projected into the images and added). ``H = [∂(u_l, u_r)/∂X, 0 …]`` touches the pose's
+        columns only; the update is the stacked one of :meth:`update`, in Joseph form. ``ids`` of the result are
+        the points' indices.
+        """
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        z = np.asarray(measured, dtype=float).reshape(-1, 2)
+        m = len(p)
+        if m == 0:
+            return UpdateResult()
+        R = np.asarray(cov_measured, dtype=float)
+        if R.shape != (m, 2, 2) or not np.all(np.isfinite(R)):
+            raise InputError(expected(f"a finite ({m}, 2, 2) array of covariances", R.shape,
+                                      where="update_known_points.cov_measured"))
+        if z.shape != (m, 2) or not (np.all(np.isfinite(z)) and np.all(np.isfinite(p))):
+            raise InputError(expected("finite (u_l, u_r) and positions, one per point", z,
+                                      where="update_known_points"))
+        uv, J_I_X, J_I_p = self._camera(pan).project_columns(self._x[:3], p, jacobians=True)
+        if not np.all(np.isfinite(uv)):
+            raise GeometryError("a known point is behind the camera; it cannot update the filter")
+        if cov_points is not None:
+            C = np.asarray(cov_points, dtype=float).reshape(m, 2, 2)
+            R = R + J_I_p @ C @ np.swapaxes(J_I_p, 1, 2)
+        H = J_I_X.reshape(2 * m, 3)
+        nu = (z - uv).reshape(-1)
+        idx = np.arange(3)
+        with _one_blas_thread(len(self._x)):
+            PHt = self._P[:, idx] @ H.T
+            S = H @ PHt[idx]
+            S = 0.5 * (S + S.T)
+            ar = np.arange(m)
+            blocks = np.zeros((m, 2, m, 2))
+            blocks[ar, :, ar, :] = R
+            S += blocks.reshape(2 * m, 2 * m)
+            sol = np.linalg.solve(S, np.column_stack([PHt.T, nu]))
+            K = sol[:, :-1].T
+            self._x = self._x + K @ nu
+            _add_sym_rank(self._P, 0.5 * (K @ S) - PHt, K)
+        self._x[2] = wrap_angle(self._x[2])
+        nu2 = nu.reshape(m, 2)
+        S_blocks = S.reshape(m, 2, m, 2)[ar, :, ar, :]
+        nis = np.einsum("mi,mi->m", nu2, np.linalg.solve(S_blocks, nu2[..., None])[..., 0])
+        return UpdateResult(np.arange(m), nu2, nis, float(nu @ sol[:, -1]))
+
+    def known_point_nis(self, points, measured, cov_measured, pan: float = 0.0, *, cov_points=None) -> np.ndarray:
+        """(m,) the NIS (2 dof) each known point's observation would have alone (:meth:`update_known_points`)."""
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        z = np.asarray(measured, dtype=float).reshape(-1, 2)
+        if len(p) == 0:
+            return np.zeros(0)
+        uv, J_I_X, J_I_p = self._camera(pan).project_columns(self._x[:3], p, jacobians=True)
+        S = J_I_X @ self._P[:3, :3] @ np.swapaxes(J_I_X, 1, 2) + np.asarray(cov_measured, dtype=float).reshape(-1, 2, 2)
+        if cov_points is not None:
+            S = S + J_I_p @ np.asarray(cov_points, dtype=float).reshape(-1, 2, 2) @ np.swapaxes(J_I_p, 1, 2)
+        nu = z - uv
+        out = np.full(len(p), np.inf)
+        ok = np.all(np.isfinite(nu), axis=1)
+        out[ok] = np.einsum("mi,mi->m", nu[ok], np.linalg.solve(S[ok], nu[ok][..., None])[..., 0])
+        return out
 
     # ---------------------------------------------------------- serialisation
     def landmarks_to_dict(self) -> list[dict]:

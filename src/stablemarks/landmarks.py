@@ -524,9 +524,11 @@ def search_boundary(
             k = np.flatnonzero(near)[np.argmax(beyond[near, 0])]
             u_b[:] = members_u[k]
             snapped = True
-            if not right_found:
-                var_b[1] = var_b[0]
-                right_found = True
+            # the edge is now that segment pair's lines, each good to the line noise: the spread of the
+            # region's border rows it replaced no longer applies (what may lie between line and edge is
+            # the shared ``border`` term below)
+            var_b[:] = camera.sigma_img**2
+            right_found = True
     if right_found and not snapped:
         # The two borders were found apart. Block matching moves a depth edge in 3-D (both images the same way),
         # so the pair keeps the wall's disparity; a right border more than half a window from it is another

@@ -482,7 +482,7 @@ class Localizer:
                 names.append((b.plane_id, b.edge))
         if not pts:
             return []
-        cov_map = np.broadcast_to(self.world_map.accuracy_cov, (len(pts), 2, 2))
+        cov_map = np.stack([self.world_map.edge_cov(plane_id, edge) for plane_id, edge in names])
         nis = self.ekf.known_point_nis(pts, z, R, pan, cov_points=cov_map)
         keep = np.flatnonzero(nis <= self.config.ekf.gate)
         if not len(keep):

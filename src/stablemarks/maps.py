@@ -170,6 +170,16 @@ class Map:
         offset, angle = self.accuracy
         return np.diag([offset, np.tan(angle)]) ** 2
 
+    def edge_cov(self, plane_id: str, which: str) -> np.ndarray:
+        """(2, 2) covariance [m²] of the map position of a wall's free edge ``which`` (``"p1"``/``"p2"``) from
+        :attr:`accuracy`: along the wall's normal its offset σ plus its angle σ turning the wall about its middle
+        (half its length away); along the wall the offset σ (an end is drawn as well as a wall is placed)."""
+        offset, angle = self.accuracy
+        plane = self[plane_id]
+        n, d = plane.normal, plane.direction
+        across = offset**2 + (math.tan(angle) * plane.length / 2.0) ** 2
+        return across * np.outer(n, n) + offset**2 * np.outer(d, d)
+
     def __getitem__(self, plane_id: str) -> ReferencePlane:
         for p in self.planes:
             if p.id == plane_id:

@@ -270,7 +270,7 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
             graph.add(group_prior_factor([L(int(i)) for i in ids], values, cov))
         for plane_id, edge, u_l, u_r, cov_uv in getattr(rec, "edge_measurements", []):
             graph.add(edge_factor(X(k), cam_k, result.world_map[plane_id].edge(edge), (u_l, u_r), cov_uv,
-                                  result.world_map.accuracy_cov, rec.pose))
+                                  result.world_map.edge_cov(plane_id, edge), rec.pose))
 
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(int(max_iterations))

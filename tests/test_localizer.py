@@ -1,5 +1,7 @@
 """The public streaming API: ``sm.open_sequence`` + ``sm.Localizer.step``, equal to ``stablemarks run``."""
 
+import copy
+
 import numpy as np
 import pytest
 import yaml
@@ -163,3 +165,38 @@ def test_a_small_pattern_among_many_landmarks_in_view_is_used_only_if_likely(lab
     est = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
     assert (len(est.record.observed) == 2) is used
     assert any("landmarks in view were associated" in w for w in est.record.warnings) is not used
+
+
+def test_free_edges_found_again_update_the_pose_unless_outside_their_gate(lab_seq, monkeypatch):
+    """A snapped boundary is the image of a free edge the map gives: frames that find it again update the pose
+    (``ekf.edge_updates``). A boundary found where the pose says it cannot be (a mis-snap onto a line inside the
+    edge) is left out by the gate, not used."""
+    seq = sm.open_sequence(lab_seq)
+    frames = list(seq)
+    runs = {}
+    for on in (True, False):
+        loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose,
+                           config=sm.Config().with_overrides({"ekf": {"edge_updates": on}}))
+        ests = [loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan) for f in frames[:-1]]
+        runs[on] = (loc, ests)
+    loc, ests = runs[True]
+    used = [m for e in ests for m in e.record.edge_measurements]
+    assert used and not any(e.record.edge_measurements for e in runs[False][1])
+    for plane_id, edge, u_l, u_r, cov in used:
+        assert plane_id in {p.id for p in seq.world_map} and edge in ("p1", "p2")
+        assert np.all(np.linalg.eigvalsh(np.asarray(cov)) > 0)
+    # the last frame updates from its free edges; the same frame with its boundaries moved 12 px does not
+    f = frames[-1]
+    twin = copy.deepcopy(loc)
+    assert twin.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan).record.edge_measurements
+    real = loc._update_edges
+
+    def shifted(model, entered, measurements, pan):
+        for pm in model.planes:
+            for b in pm.boundaries:
+                object.__setattr__(b, "u", np.asarray(b.u, dtype=float) + 12.0)
+        return real(model, entered, measurements, pan)
+
+    monkeypatch.setattr(loc, "_update_edges", shifted)
+    est = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
+    assert est.record.edge_measurements == []

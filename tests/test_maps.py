@@ -161,3 +161,20 @@ def test_a_map_says_how_accurate_its_walls_are(tmp_path):
     grid[20:22, 5:35] = 100
     walls = walls_from_occupancy(grid.astype(int), 0.05, (0.0, 0.0, 0.0))
     assert walls.accuracy[0] >= 0.02 and walls.accuracy[1] == pytest.approx(math.radians(0.5))
+
+
+def test_a_free_edge_is_as_uncertain_as_the_map_says():
+    """``Map.edge_cov``: zero for an exact map; across the wall its offset σ plus its angle σ turning it about
+    its middle, along it the offset σ; symmetric positive semi-definite."""
+    import math
+
+    from stablemarks.maps import parse_map
+
+    doc = {"planes": [{"id": "a", "p1": [0, 0], "p2": [0, 4]}]}  # along y: normal ±x
+    assert np.array_equal(parse_map(doc).edge_cov("a", "p1"), np.zeros((2, 2)))
+    m = parse_map({**doc, "accuracy": {"offset": 0.02, "angle_deg": 0.5}})
+    C = m.edge_cov("a", "p2")
+    assert C[0, 0] == pytest.approx(0.02**2 + (math.tan(math.radians(0.5)) * 2.0) ** 2)
+    assert C[1, 1] == pytest.approx(0.02**2)
+    assert C[0, 1] == pytest.approx(0.0, abs=1e-15)
+    assert np.allclose(C, C.T) and np.all(np.linalg.eigvalsh(C) >= 0)

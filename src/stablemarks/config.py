@@ -63,40 +63,30 @@ class FilterConfig:
 class NoiseConfig:
     """Measurement noise shared by every stage that models uncertainty."""
 
-    sigma_img: float = 0.25
+    sigma_img: float = 0.05
     """Standard deviation of a vertical line's column in one image, as the filter must take it [px]. Used by the
     plane prediction gates and fit (Eqs 4–10), the boundary and feature model (Eqs 12–17) and the filter's
     observation noise (Eq 20). Measured, not the paper's 0.5 px (the ``paper`` preset): on the simulator's
-    realistic optics a matched line is only 0.03–0.13 px RMS from its true column, but the errors of the lines of
-    one frame and of one line over frames are not independent, and a filter taking them as independent at that
-    level is overconfident (room's pose NEES 16 with 0.1 px). ``stablemarks calibrate-noise`` measures the
-    line noise and then the smallest multiple of it with which the filter is consistent on recordings with
-    ground truth: 0.25 px here (pose NEES 3.7 on room, 3.9 on corridor, 2.0 on office). With the association and
-    pan rules of December 2026, 0.15 px was tried (``stablemarks eval``, 8–10 trials): lab 1.3 → 2.0 and hall
-    2.1 → 3.1, but room 2.6 → 7.1 and office overconfident over its first 40 frames (NEES 5–11); not adopted."""
+    realistic optics the lines the filter updates with are 0.02 px (lab) to 0.05 px (room) RMS from their true
+    columns, and the part of that error a landmark keeps from frame to frame is 0.01–0.04 px (its mean over
+    the frames it is seen). Earlier defaults took 0.25 px because the filter was overconfident with less (room:
+    pose NEES 16 with 0.1 px); that came from the fitted walls, whose shared disparity error
+    (``planes.disparity_bias_px``) was not modelled, not from the lines: with it modelled, 0.05 px is
+    consistent on room (pose NEES 0.9 over 6 trials against 20 without it) and the pose error is 2–4 times
+    smaller on every built-in scenario."""
 
-    boundary_px: float | None = 2.0
+    boundary_px: float | None = 0.25
     """σ of a boundary's column when a member segment marks the edge (Sec 3.2: the boundary moved to the
-    outermost segment) [px], shared by both images, beyond the rows' spread and the line noise. None: a uniform
+    outermost segment) [px], shared by both images, beyond the line noise of that segment pair. None: a uniform
     allowance over the SAD window, ``sad.block_size / sqrt(12)`` (4.3 px for 15 px; the paper's model, which
-    reproduces Table 1's σ). Default 2 px: at the true pose a snapped boundary sits within a few tenths of a
-    pixel, but the region's border lies 4–8 px inside the edge, so a line painted that close to the edge is
-    taken for it (the office whiteboard's landmarks came out 19–25 mm off at 4 m, 2–3 px). Measured at the true
-    pose over 60–90 frames of each built-in scenario: the median error of a snapped boundary is 0.13–0.49 px and
-    99 % lie within 1.6 px, but the office has mis-snaps of 13–23 px (0.1 m) that no Gaussian σ covers; 2 px is
-    cautious for most edges (their errors are 0.2 σ). 0.75 px was tried on all six scenarios: pose NEES closer to
-    its bounds on lab (1.3 → 1.5) and room (2.4 → 2.8), but one office trial's recovery after a blind stretch then
-    failed (ATE 0.22 m). Tried again once the head no longer looked at bare walls for 20 frames (the free-edge
-    rule of :func:`~stablemarks.motion.look_at_free_edges`), on office and hall with 8 trials each: office pose
-    NEES 3.9 → 5.9 and ATE 12 → 22 mm, hall NEES 1.7 → 2.4 and ATE 21 → 26 mm. The default stays. Measured again
-    in December 2026 (true pose, 3 trials × 60–80 frames of lab, room, corridor, office, hall): snapped boundaries
-    are 0.08–0.22 px RMS from the edge (99 % within 0.4 px) while their modelled σ, this plus the spread of the
-    region's border rows they replaced, is 2.7 px; but a few snap onto a line 2–3 px inside the edge (the
-    hall's screens at 9 m: 8 cm). Taking only the line noise plus this σ (2.0 px in all) met the room's goal
-    (pose NEES 3.1, 96 % of frames inside, 20 trials) but left the corridor overconfident over frames 5–20
-    (NEES 5–8: the fitted walls' own variance, 2–8 times too small, see ``planes.disparity_bias_px``, then
-    shows); with 0.5 px and that bias modelled, office trials peaked at NEES 225–954 on such snaps. Not
-    adopted."""
+    reproduces Table 1's σ). Measured at the true pose (3 trials × 60–80 frames of lab, room, corridor, office,
+    hall): snapped boundaries are 0.08–0.22 px RMS from the edge and 99 % lie within 0.4 px. A few snap onto a
+    line 2–8 px inside the edge (a whiteboard's frame, the hall's screens at 9 m), which no Gaussian σ covers:
+    they are caught instead by the map — the boundary must fit the map's free edge through the pose before
+    (``landmarks.boundary_gate_sigma``) and after the frame's update (``Localizer._recheck_boundaries``), and a
+    free edge found again updates the pose only inside the association gate (``ekf.edge_updates``). The
+    earlier 2 px, with the spread of the region's border rows it replaced on top (2.7 px in all), held every
+    landmark and the pose along the walls 10 times less certain than their errors."""
     free_boundary_px: float | None = 8.0
     """The same when no segment marks the edge and the boundary is the planar region's border itself: block
     matching moves a depth edge by about half its window, mostly inward (``calibrate-noise``: 7.4 px on the
@@ -201,11 +191,13 @@ class Config:
 
 
 PRESETS = {
-    "paper": {"noise": {"sigma_img": 0.5, "boundary_px": None, "free_boundary_px": None}},
+    "paper": {"noise": {"sigma_img": 0.5, "boundary_px": None, "free_boundary_px": None},
+              "planes": {"disparity_bias_px": 0.0}, "ekf": {"edge_updates": False}},
 }
-"""Named configurations: ``paper`` — the paper's σ_img = 0.5 px (Sec 2.3.1) and a boundary known to within the
-SAD window (``w / sqrt(12)``), which reproduce Table 1's σ; the defaults are measured instead
-(``stablemarks calibrate-noise``)."""
+"""Named configurations: ``paper`` — the paper's σ_img = 0.5 px (Sec 2.3.1), a boundary known to within the
+SAD window (``w / sqrt(12)``) and no shared disparity error of a wall, which reproduce Table 1's σ, and a filter
+that uses a boundary only to model landmarks (no ``ekf.edge_updates``), as the paper's; the defaults are
+measured instead (``stablemarks calibrate-noise``)."""
 
 
 MAX_SETTING = 1e9

@@ -67,9 +67,9 @@ class NoiseConfig:
     """Standard deviation of a vertical line's column in one image, as the filter must take it [px]. Used by the
     plane prediction gates and fit (Eqs 4–10), the boundary and feature model (Eqs 12–17) and the filter's
     observation noise (Eq 20). Measured, not the paper's 0.5 px (the ``paper`` preset): on the simulator's
-    realistic optics the lines the filter updates with are 0.02 px (lab) to 0.05 px (room) RMS from their true
-    columns, and the part of that error a landmark keeps from frame to frame is 0.01–0.04 px (its mean over
-    the frames it is seen). Earlier defaults took 0.25 px because the filter was overconfident with less (room:
+    realistic optics the lines the filter updates with are 0.02 px (lab) to 0.09 px (office) RMS from their
+    true columns; most of that stays with the landmark from frame to frame (its mean over the frames it is
+    seen, 0.01–0.07 px: ``ekf.landmark_floor_px``), the scatter about that mean is 0.014–0.034 px. Earlier defaults took 0.25 px because the filter was overconfident with less (room:
     pose NEES 16 with 0.1 px); that came from the fitted walls, whose shared disparity error
     (``planes.disparity_bias_px``) was not modelled, not from the lines: with it modelled, 0.05 px is
     consistent on room (pose NEES 0.9 over 6 trials against 20 without it) and the pose error is 2–4 times

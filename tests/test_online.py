@@ -153,7 +153,14 @@ def test_records_replay_the_filter(lab_short, lab_scenario):
                 lm = result.ekf.landmark(i)
                 new.append(NewLandmark.wall(result.world_map[lm.plane_id], s, lm.edge, lm.z_low, lm.z_high))
             ekf.add_landmarks(new, cov, ids=ids)
+        if rec.edge_measurements:  # free edges found again (ekf.edge_updates), after the landmarks entered
+            wm = result.world_map
+            ekf.update_known_points([wm[p].edge(e) for p, e, *_ in rec.edge_measurements],
+                                    [(ul, ur) for _, _, ul, ur, _ in rec.edge_measurements],
+                                    np.array([c for *_, c in rec.edge_measurements]), rec.pan,
+                                    cov_points=np.stack([wm.edge_cov(p, e) for p, e, *_ in rec.edge_measurements]))
     assert sum(len(r.measurements) for r in result.records) > 20
+    assert any(r.edge_measurements for r in result.records)
     np.testing.assert_allclose(ekf.pose, result.ekf.pose, atol=1e-12)
     np.testing.assert_allclose(ekf.cov_pose, result.ekf.cov_pose, atol=1e-15)
 

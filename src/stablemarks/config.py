@@ -63,17 +63,23 @@ class FilterConfig:
 class NoiseConfig:
     """Measurement noise shared by every stage that models uncertainty."""
 
-    sigma_img: float = 0.05
+    sigma_img: float = 0.25
     """Standard deviation of a vertical line's column in one image, as the filter must take it [px]. Used by the
     plane prediction gates and fit (Eqs 4–10), the boundary and feature model (Eqs 12–17) and the filter's
     observation noise (Eq 20). Measured, not the paper's 0.5 px (the ``paper`` preset): on the simulator's
-    realistic optics the lines the filter updates with are 0.02 px (lab) to 0.09 px (office) RMS from their
-    true columns; most of that stays with the landmark from frame to frame (its mean over the frames it is
-    seen, 0.01–0.07 px: ``ekf.landmark_floor_px``), the scatter about that mean is 0.014–0.034 px. Earlier defaults took 0.25 px because the filter was overconfident with less (room:
-    pose NEES 16 with 0.1 px); that came from the fitted walls, whose shared disparity error
-    (``planes.disparity_bias_px``) was not modelled, not from the lines: with it modelled, 0.05 px is
-    consistent on room (pose NEES 0.9 over 6 trials against 20 without it) and the pose error is 2–4 times
-    smaller on every built-in scenario."""
+    realistic optics a matched line is only 0.03–0.13 px RMS from its true column, but the errors of the lines of
+    one frame and of one line over frames are not independent, and a filter taking them as independent at that
+    level is overconfident (room's pose NEES 16 with 0.1 px). ``stablemarks calibrate-noise`` measures the
+    line noise and then the smallest multiple of it with which the filter is consistent on recordings with
+    ground truth: 0.25 px here (pose NEES 3.7 on room, 3.9 on corridor, 2.0 on office). With the association and
+    pan rules of December 2026, 0.15 px was tried (``stablemarks eval``, 8–10 trials): lab 1.3 → 2.0 and hall
+    2.1 → 3.1, but room 2.6 → 7.1 and office overconfident over its first 40 frames (NEES 5–11); not adopted.
+    The lines themselves scatter by only 0.014–0.034 px about their landmark's mean error (0.01–0.07 px) on the
+    simulator; 0.05 px with a wall's shared disparity error modelled (``planes.disparity_bias_px`` 0.044) and the
+    SAD pixel noise set apart (``planes.disparity_noise_px`` 0.2) halved the pose error again and was consistent
+    on room, but narrowed the gates of the plane prediction so far that a kidnapped or wrongly panned robot's
+    walls were no longer fitted whole (the room kidnapped by 0.5 m was not relocalized; a wrong pan was not
+    recognised): not adopted yet."""
 
     boundary_px: float | None = 0.25
     """σ of a boundary's column when a member segment marks the edge (Sec 3.2: the boundary moved to the
@@ -192,10 +198,10 @@ class Config:
 
 PRESETS = {
     "paper": {"noise": {"sigma_img": 0.5, "boundary_px": None, "free_boundary_px": None},
-              "planes": {"disparity_bias_px": 0.0}, "ekf": {"edge_updates": False}},
+              "ekf": {"edge_updates": False}},
 }
 """Named configurations: ``paper`` — the paper's σ_img = 0.5 px (Sec 2.3.1), a boundary known to within the
-SAD window (``w / sqrt(12)``) and no shared disparity error of a wall, which reproduce Table 1's σ, and a filter
+SAD window (``w / sqrt(12)``), which reproduce Table 1's σ, and a filter
 that uses a boundary only to model landmarks (no ``ekf.edge_updates``), as the paper's; the defaults are
 measured instead (``stablemarks calibrate-noise``)."""
 

@@ -57,17 +57,20 @@ class PlaneConfig:
     member_dilate_px: int = 3
     """The region is dilated by this much before the membership test (edges sit at region borders)."""
 
-    disparity_bias_px: float = 0.044
+    disparity_bias_px: float = 0.0
     """σ of a disparity error shared by every pixel of one wall [px], added to the fitted line's covariance.
     Sub-pixel block matching is biased towards whole disparities (pixel locking), and a wall seen nearly
     frontally has about the same fractional disparity everywhere, so its pixels share that bias and averaging
     them does not remove it. Measured at the true pose on the simulator's walls as the disparity that the fitted
     wall's offset error amounts to, RMS (``python benchmarks/noise_at_true_pose.py lab room corridor office
-    hall``): 0.021 px on lab, 0.034 on room, 0.059 on corridor, 0.064 on office, 0.023 on hall; the default is
-    their RMS, 0.044 px. Without it the fitted offset is held 2–8 times too certain, and with line noise at its
-    measured level (``noise.sigma_img`` 0.05–0.1 px) the filter is overconfident (room: pose NEES 20). It varies
-    with the scene (with each wall's fractional disparity): a scene whose walls are less biased than the RMS
-    (lab, room) comes out cautious with it (pose NEES 0.9–1.0), the office, biased more, near 2.4."""
+    hall``): 0.021 px on lab, 0.034 on room, 0.059 on corridor, 0.064 on office, 0.023 on hall. Without it the
+    fitted offset is held 2–8 times too certain (median of the normalised squared errors; mean 5–29); with
+    0.03 px the mean is 0.4–2.2. Default 0 all the same: tried with 0.03 px (December 2026, together with a
+    snapped boundary's σ of 0.5 px from its line and the window's correlation counted down the column too), the
+    whole filter became more cautious, not more consistent (pose NEES on lab 1.3 → 0.8, room 2.6 → 1.0, 20
+    trials), because the landmarks the fit feeds are already held less certain than their errors (by the
+    boundary's σ, ``noise.boundary_px``), and the office then had three trials with NEES peaks of 225–954. Set it
+    when the fitted walls themselves are used, or once the boundary's σ can be measured smaller."""
 
     def sigma_nu(self, camera: StereoCamera) -> float:
         return float(self.disparity_noise_px) if self.disparity_noise_px else float(np.sqrt(2.0) * camera.sigma_img)

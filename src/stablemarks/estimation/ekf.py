@@ -105,16 +105,14 @@ class EKFConfig:
         far inside the image [px].
     max_missed : a wall landmark predicted in view on a wall modelled in the frame but not associated for this
         many frames in a row is dropped from the filter (marginalised out): it was wrong or is not stable.
-    landmark_floor_px : no wall landmark is held more certain along its wall than a shift of its line by this
-        many pixels in the left image would move it [px]: after an update, a landmark whose σ fell below
-        ``landmark_floor_px / |∂u_l/∂s|`` (at the view of that update: farther or more oblique, larger) gets the
-        difference added to its variance. The errors of a line seen again and again are not independent from frame
-        to frame (the same blur, the same texture around it), so repeated observations cannot shrink its error
-        without bound. Measured on the simulator as the mean error of each landmark's line over the frames it
-        updated the filter: 0.011 px RMS on lab, 0.038 on room, 0.045 on office, 0.071 on hall (0.047 over the
-        four; default 0.05). A floor in metres cannot serve every range: 5 mm held
-        the lab's landmarks 2–5 times less certain than their errors once the free edges pinned the pose
-        (landmark NEES 0.06–0.14), 1 mm held the hall's at 6–12 m 3 times too certain (landmark NEES 3.1).
+    landmark_sigma_floor : no landmark is held more certain than this along its wall [m]: after an update, a
+        landmark whose σ fell below it gets the difference added to its variance. The errors of a landmark do not
+        all average out over the frames it is seen in: the part of its line's column error that stays with it
+        (0.011 px RMS on lab, 0.038 on room, 0.045 on office, 0.071 on hall: its mean over the frames it updated
+        the filter) and errors of its model (a boundary snapped onto a line beside the edge, the fitted wall's
+        shared disparity error), so repeated observations cannot shrink its error without bound. A floor in
+        pixels at the current view (0.05 px) was tried: the office's landmarks, 3–6 m away, came out 10 times
+        too certain (landmark NEES 11.6, 8 trials); 1 mm left the hall's, 6–12 m away, 3 times too certain.
         0 turns it off.
     recheck_sigma : an associated wall landmark whose along-wall position disagrees with the frame's own model
         of the same line by more than this many σ (both variances) is dropped and entered again from the
@@ -130,7 +128,7 @@ class EKFConfig:
     margin_px: float = 0.0
     max_missed: int = 5
     recheck_sigma: float = 3.0
-    landmark_floor_px: float = 0.05
+    landmark_sigma_floor: float = 0.005
     edge_updates: bool = True
 
     def __post_init__(self) -> None:
@@ -145,9 +143,9 @@ class EKFConfig:
         m = self.max_missed
         if isinstance(m, bool) or not isinstance(m, int | np.integer) or m < 1:
             raise ConfigError(expected("a positive integer", m, where="ekf.max_missed"))
-        if not (np.isfinite(self.landmark_floor_px) and self.landmark_floor_px >= 0):
-            raise ConfigError(expected("a non-negative number of pixels", self.landmark_floor_px,
-                                       where="ekf.landmark_floor_px"))
+        if not (np.isfinite(self.landmark_sigma_floor) and self.landmark_sigma_floor >= 0):
+            raise ConfigError(expected("a non-negative number of metres", self.landmark_sigma_floor,
+                                       where="ekf.landmark_sigma_floor"))
         if not (np.isfinite(self.recheck_sigma) and self.recheck_sigma > 0):
             raise ConfigError(expected("a positive number", self.recheck_sigma, where="ekf.recheck_sigma"))
         if not (np.isfinite(self.margin_px) and self.margin_px >= 0):
@@ -951,15 +949,11 @@ class JointEKF:
             t = self._tracks[int(self._ids[r])]
             t.n_observed += 1
             t.last_frame = frame if frame is not None else t.last_frame
-        floor_px = self.config.landmark_floor_px
-        if floor_px > 0:
-            for j, r in enumerate(rows):
+        floor = self.config.landmark_sigma_floor**2
+        if floor > 0:
+            for r in rows:
                 i = int(self._idx2[r, 0])
-                du_ds = abs(float(J_I_l[j, 0, 0]))
-                if self._tracks[int(self._ids[r])].kind != "wall" or du_ds == 0.0:
-                    continue
-                floor = (floor_px / du_ds) ** 2
-                if self._P[i, i] < floor:
+                if self._tracks[int(self._ids[r])].kind == "wall" and self._P[i, i] < floor:
                     self._P[i, i] = floor  # adds floor − P_ii ≥ 0 on the diagonal: P stays PSD
         return UpdateResult(self._ids[rows].copy(), nu2, nis, nis_total)
 

@@ -160,7 +160,6 @@ def test_records_replay_the_filter(lab_short, lab_scenario):
                                     np.array([c for *_, c in rec.edge_measurements]), rec.pan,
                                     cov_points=np.stack([wm.edge_cov(p, e) for p, e, *_ in rec.edge_measurements]))
     assert sum(len(r.measurements) for r in result.records) > 20
-    assert any(r.edge_measurements for r in result.records)
     np.testing.assert_allclose(ekf.pose, result.ekf.pose, atol=1e-12)
     np.testing.assert_allclose(ekf.cov_pose, result.ekf.cov_pose, atol=1e-15)
 

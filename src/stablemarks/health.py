@@ -166,6 +166,11 @@ class HealthMonitor:
             return not found or self._clean + 1 < c
         return edges_missing and self.runs["edges_not_found"] + 1 >= c
 
+    @property
+    def active(self) -> bool:
+        """Whether any condition held at the last update."""
+        return any(self.holds(k) for k in CONDITIONS)
+
     def holds(self, name: str) -> bool:
         """Whether condition ``name`` held at the last update."""
         c = self.config

@@ -718,7 +718,8 @@ class Localizer:
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
                                        self.config)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
-            if not pan_suspect and record.inflation == 1.0 and self.config.ekf.edge_updates and model is not None:
+            if not pan_suspect and record.inflation == 1.0 and self.config.ekf.edge_updates and model is not None \
+                    and len(record.observed) >= self.config.health.min_pattern and not self.health.active:
                 record.edge_measurements = self._update_edges(model, entered, record.measurements, pan)
             timings["select"] = time.perf_counter() - t3
         drift = self._heading_drift() if method.uses_vision and self.health.drift is None else None

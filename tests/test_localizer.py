@@ -184,6 +184,7 @@ def test_free_edges_found_again_update_the_pose_unless_outside_their_gate(lab_se
     assert used and not any(e.record.edge_measurements for e in runs[False][1])
     for plane_id, edge, u_l, u_r, cov in used:
         assert plane_id in {p.id for p in seq.world_map} and edge in ("p1", "p2")
+        assert 0 <= u_r < u_l < seq.camera.width  # a disparity, in the image
         assert np.all(np.linalg.eigvalsh(np.asarray(cov)) > 0)
     # the last frame updates from its free edges; the same frame with its boundaries moved 12 px does not
     f = frames[-1]

@@ -90,7 +90,7 @@ class NoiseConfig:
     0.08–0.22 px RMS from the edge and 99 % lie within 0.4 px, but a few snap onto a line 2–8 px inside the edge
     (a whiteboard's frame, the hall's screens at 9 m), which no Gaussian σ covers: the map checks boundaries
     before (``landmarks.boundary_gate_sigma``) and after the frame's update (``Localizer._recheck_boundaries``).
-    0.25 px, with ``ekf.edge_updates``, takes the pose error down 2–4 times on lab, room and corridor but is not
+    0.25 px, with ``ekf.edge_updates``, takes the ATE down 1.7–3 times on lab, room and corridor but is not
     the default yet (see ``ekf.edge_updates``); 2 px covers those snaps when landmarks are modelled from them.
     Earlier measurements: 0.75 px was tried on all six scenarios: pose NEES closer to its bounds on lab
     (1.3 → 1.5) and room (2.4 → 2.8), but one office trial's recovery after a blind stretch then failed (ATE

@@ -122,10 +122,11 @@ class EKFConfig:
         where the robot is along that wall. The paper uses a boundary only once, when the landmarks are modelled
         from it; then the pose along a wall is known only as well as the first boundary was found. Only in frames
         that update from a pattern of ``health.min_pattern`` landmarks while no health condition holds. Off by
-        default: with ``noise.boundary_px`` 0.25 it takes the pose error down 2–4 times on lab, room and corridor
-        (``stablemarks eval``, 20 trials), but one office trial in eight held the pose overconfident (NEES 52),
-        and two fault recoveries fail with it (the room kidnapped by 0.5 m ends overconfident; the corridor whose
-        pan is left out while the head turns is not recognised in time).
+        default: with ``noise.boundary_px`` 0.25 the ATE fell 1.7–3 times on lab, room and corridor and by
+        16–31 % on office and hall (``stablemarks eval``, 20 trials), but an office and a hall trial ended
+        overconfident (run-mean pose NEES 87 and 20), and two fault recoveries fail with it (the room
+        kidnapped by 0.5 m ends overconfident; the corridor whose pan is left out while the head turns is not
+        recognised in time).
     """
 
     gate_probability: float = 0.99

@@ -464,15 +464,9 @@ class Localizer:
         it held the pose 3 cm off with σ 0.8 cm for 20 frames). The frame's update narrows the pose: the
         boundary's columns must then fit the map's edge projected from it (NIS inside the association gate).
         """
-        bad: dict[tuple[str, str], float] = {}
-        for pm in model.planes:
-            for b in pm.boundaries:
-                if not b.snapped or b.cov_uv is None:
-                    continue
-                nis = self.ekf.known_point_nis([self.world_map[b.plane_id].edge(b.edge)], [b.u], [b.cov_uv], pan,
-                                               cov_points=[self.world_map.edge_cov(b.plane_id, b.edge)])[0]
-                if nis > self.config.ekf.gate:
-                    bad[(b.plane_id, b.edge)] = float(nis)
+        snapped = [b for pm in model.planes for b in pm.boundaries if b.snapped and b.cov_uv is not None]
+        nis = self._edges_nis(snapped, pan)
+        bad = {(b.plane_id, b.edge): float(v) for b, v in zip(snapped, nis, strict=True) if v > self.config.ekf.gate}
         if not bad:
             return model
         for (plane_id, edge), nis in bad.items():
@@ -497,29 +491,28 @@ class Localizer:
         """
         used = {(c.plane_id, c.edge) for c in entered.candidates if c is not None}
         lines = np.array([ul for _, ul, _ in measurements])
-        pts, z, R, names = [], [], [], []
-        for pm in model.planes:
-            if pm.gated:
-                continue
-            for b in pm.boundaries:
-                if not b.snapped or b.cov_uv is None or (b.plane_id, b.edge) in used:
-                    continue
-                if len(lines) and np.min(np.abs(lines - b.u[0])) < 1.0:
-                    continue
-                pts.append(self.world_map[b.plane_id].edge(b.edge))
-                z.append(np.asarray(b.u, dtype=float))
-                R.append(np.asarray(b.cov_uv, dtype=float))
-                names.append((b.plane_id, b.edge))
-        if not pts:
+        found = [b for pm in model.planes if not pm.gated for b in pm.boundaries
+                 if b.snapped and b.cov_uv is not None and (b.plane_id, b.edge) not in used
+                 and not (len(lines) and np.min(np.abs(lines - b.u[0])) < 1.0)]
+        keep = [b for b, v in zip(found, self._edges_nis(found, pan), strict=True) if v <= self.config.ekf.gate]
+        if not keep:
             return []
-        cov_map = np.stack([self.world_map.edge_cov(plane_id, edge) for plane_id, edge in names])
-        nis = self.ekf.known_point_nis(pts, z, R, pan, cov_points=cov_map)
-        keep = np.flatnonzero(nis <= self.config.ekf.gate)
-        if not len(keep):
-            return []
-        self.ekf.update_known_points(np.array(pts)[keep], np.array(z)[keep], np.array(R)[keep], pan,
-                                     cov_points=cov_map[keep])
-        return [(names[i][0], names[i][1], float(z[i][0]), float(z[i][1]), np.asarray(R[i]).tolist()) for i in keep]
+        pts, z, R, cov_map = self._edge_observations(keep)
+        self.ekf.update_known_points(pts, z, R, pan, cov_points=cov_map)
+        return [(b.plane_id, b.edge, float(b.u[0]), float(b.u[1]), np.asarray(b.cov_uv).tolist()) for b in keep]
+
+    def _edge_observations(self, boundaries) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Snapped ``boundaries`` as observations of the map's free edges: the edges' map positions (m, 2), the
+        boundaries' columns (m, 2) and covariances (m, 2, 2), the edges' map covariances (m, 2, 2)."""
+        return (np.array([self.world_map[b.plane_id].edge(b.edge) for b in boundaries]).reshape(-1, 2),
+                np.array([b.u for b in boundaries], dtype=float).reshape(-1, 2),
+                np.array([b.cov_uv for b in boundaries], dtype=float).reshape(-1, 2, 2),
+                np.array([self.world_map.edge_cov(b.plane_id, b.edge) for b in boundaries]).reshape(-1, 2, 2))
+
+    def _edges_nis(self, boundaries, pan: float) -> np.ndarray:
+        """(m,) NIS of each snapped boundary against the map's free edge at the current pose."""
+        pts, z, R, cov_map = self._edge_observations(boundaries)
+        return self.ekf.known_point_nis(pts, z, R, pan, cov_points=cov_map)
 
     def _increment(self, odometry) -> tuple[SE2 | None, np.ndarray | None]:
         if odometry is None:

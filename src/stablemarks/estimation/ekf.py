@@ -963,21 +963,12 @@ class JointEKF:
                     self._P[i, i] = floor  # adds floor − P_ii ≥ 0 on the diagonal: P stays PSD
         return UpdateResult(self._ids[rows].copy(), nu2, nis, nis_total)
 
-    def update_known_points(self, points, measured, cov_measured, pan: float = 0.0, *,
-                            cov_points=None) -> UpdateResult:
-        """Update the pose with the observed columns of points whose map positions are known (not in the state).
-
-        ``points`` (m, 2) [m] in the map frame, ``measured`` (m, 2) their ``(u_l, u_r)`` [px], ``cov_measured``
-        (m, 2, 2) the measurement covariances [px²], ``cov_points`` (m, 2, 2) the points' own uncertainty in the
-        map [m²] (projected into the images and added). ``H = [∂(u_l, u_r)/∂X, 0 …]`` touches the pose's
-        columns only; the update is the stacked one of :meth:`update`, in Joseph form. ``ids`` of the result are
-        the points' indices.
-        """
+    def _known_points(self, points, measured, cov_measured, pan: float, cov_points):
+        """The observation model of :meth:`update_known_points`: ``(nu (m, 2), J_I_X (m, 2, 3), R (m, 2, 2))``,
+        ``R`` the measurement covariances plus the points' own projected into the images."""
         p = np.asarray(points, dtype=float).reshape(-1, 2)
         z = np.asarray(measured, dtype=float).reshape(-1, 2)
         m = len(p)
-        if m == 0:
-            return UpdateResult()
         R = np.asarray(cov_measured, dtype=float)
         if R.shape != (m, 2, 2) or not np.all(np.isfinite(R)):
             raise InputError(expected(f"a finite ({m}, 2, 2) array of covariances", R.shape,
@@ -986,44 +977,49 @@ class JointEKF:
             raise InputError(expected("finite (u_l, u_r) and positions, one per point", z,
                                       where="update_known_points"))
         uv, J_I_X, J_I_p = self._camera(pan).project_columns(self._x[:3], p, jacobians=True)
-        if not np.all(np.isfinite(uv)):
-            raise GeometryError("a known point is behind the camera; it cannot update the filter")
         if cov_points is not None:
             C = np.asarray(cov_points, dtype=float).reshape(m, 2, 2)
             R = R + J_I_p @ C @ np.swapaxes(J_I_p, 1, 2)
-        H = J_I_X.reshape(2 * m, 3)
-        nu = (z - uv).reshape(-1)
-        idx = np.arange(3)
+        return z - uv, J_I_X, R
+
+    def update_known_points(self, points, measured, cov_measured, pan: float = 0.0, *,
+                            cov_points=None) -> UpdateResult:
+        """Update the pose with the observed columns of points whose map positions are known (not in the state).
+
+        ``points`` (m, 2) [m] in the map frame, ``measured`` (m, 2) their ``(u_l, u_r)`` [px], ``cov_measured``
+        (m, 2, 2) the measurement covariances [px²], ``cov_points`` (m, 2, 2) the points' own uncertainty in the
+        map [m²] (projected into the images and added). ``H = [∂(u_l, u_r)/∂X, 0 …]`` touches the pose's
+        columns only; the update is the stacked one of :meth:`update` (:meth:`_gain`), in Joseph form. ``ids`` of
+        the result are the points' indices.
+        """
+        if len(np.asarray(points, dtype=float).reshape(-1, 2)) == 0:
+            return UpdateResult()
+        nu2, J_I_X, R = self._known_points(points, measured, cov_measured, pan, cov_points)
+        if not np.all(np.isfinite(nu2)):
+            raise GeometryError("a known point is behind the camera; it cannot update the filter")
+        m = len(nu2)
+        ar = np.arange(m)
+        blocks = np.zeros((m, 2, m, 2))
+        blocks[ar, :, ar, :] = R
+        nu = nu2.reshape(-1)
         with _one_blas_thread(len(self._x)):
-            PHt = self._P[:, idx] @ H.T
-            S = H @ PHt[idx]
-            S = 0.5 * (S + S.T)
-            ar = np.arange(m)
-            blocks = np.zeros((m, 2, m, 2))
-            blocks[ar, :, ar, :] = R
-            S += blocks.reshape(2 * m, 2 * m)
-            sol = np.linalg.solve(S, np.column_stack([PHt.T, nu]))
+            PHt, S, sol = self._gain(np.arange(3), J_I_X.reshape(2 * m, 3), nu, blocks.reshape(2 * m, 2 * m))
             K = sol[:, :-1].T
             self._x = self._x + K @ nu
             _add_sym_rank(self._P, 0.5 * (K @ S) - PHt, K)
         self._x[2] = wrap_angle(self._x[2])
-        nu2 = nu.reshape(m, 2)
         S_blocks = S.reshape(m, 2, m, 2)[ar, :, ar, :]
         nis = np.einsum("mi,mi->m", nu2, np.linalg.solve(S_blocks, nu2[..., None])[..., 0])
-        return UpdateResult(np.arange(m), nu2, nis, float(nu @ sol[:, -1]))
+        return UpdateResult(ar, nu2, nis, float(nu @ sol[:, -1]))
 
     def known_point_nis(self, points, measured, cov_measured, pan: float = 0.0, *, cov_points=None) -> np.ndarray:
-        """(m,) the NIS (2 dof) each known point's observation would have alone (:meth:`update_known_points`)."""
-        p = np.asarray(points, dtype=float).reshape(-1, 2)
-        z = np.asarray(measured, dtype=float).reshape(-1, 2)
-        if len(p) == 0:
+        """(m,) the NIS (2 dof) each known point's observation would have alone (:meth:`update_known_points`);
+        infinite for a point behind the camera."""
+        if len(np.asarray(points, dtype=float).reshape(-1, 2)) == 0:
             return np.zeros(0)
-        uv, J_I_X, J_I_p = self._camera(pan).project_columns(self._x[:3], p, jacobians=True)
-        S = J_I_X @ self._P[:3, :3] @ np.swapaxes(J_I_X, 1, 2) + np.asarray(cov_measured, dtype=float).reshape(-1, 2, 2)
-        if cov_points is not None:
-            S = S + J_I_p @ np.asarray(cov_points, dtype=float).reshape(-1, 2, 2) @ np.swapaxes(J_I_p, 1, 2)
-        nu = z - uv
-        out = np.full(len(p), np.inf)
+        nu, J_I_X, R = self._known_points(points, measured, cov_measured, pan, cov_points)
+        S = J_I_X @ self._P[:3, :3] @ np.swapaxes(J_I_X, 1, 2) + R
+        out = np.full(len(nu), np.inf)
         ok = np.all(np.isfinite(nu), axis=1)
         out[ok] = np.einsum("mi,mi->m", nu[ok], np.linalg.solve(S[ok], nu[ok][..., None])[..., 0])
         return out

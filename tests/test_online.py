@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
+from stablemarks.config import Config
 from stablemarks.evaluation import TruthObserver
 from stablemarks.geometry import SE2
 from stablemarks.io.results import write_run
@@ -27,6 +28,14 @@ def lab_short(lab_scenario):
     run = simulate_run(lab_scenario, seed=5)
     truth = TruthObserver()
     return run, truth.result(run_online(ShortSource(run, 11), observers=[truth]))
+
+
+@pytest.fixture(scope="module")
+def lab_short_edges(lab_scenario):
+    """The same run with free-edge updates on (``ekf.edge_updates``)."""
+    run = simulate_run(lab_scenario, seed=5)
+    config = Config().with_overrides({"ekf": {"edge_updates": True}})
+    return run, run_online(ShortSource(run, 11), config=config)
 
 
 def test_lab_run_localizes_better_than_dead_reckoning(lab_short):
@@ -128,13 +137,15 @@ def test_se2_between_matches_odometry_increments(lab_scenario):
     assert_psd(lab_scenario.robot.odometry.covariance(U))
 
 
-def test_records_replay_the_filter(lab_short, lab_scenario):
-    """The records hold everything the filter used (odometry, priors of new landmarks, measurements, pans):
-    replaying them through a fresh filter gives the same final state, so a smoother can use them too."""
+@pytest.mark.parametrize("edges", [False, True])
+def test_records_replay_the_filter(lab_short, lab_short_edges, lab_scenario, edges):
+    """The records hold everything the filter used (odometry, priors of new landmarks, measurements, pans, and
+    with ``ekf.edge_updates`` the free edges found again): replaying them through a fresh filter gives the same
+    final state, so a smoother can use them too."""
     from stablemarks.estimation import JointEKF, NewLandmark
 
-    run, result = lab_short
-    from stablemarks.config import Config
+    run, result = lab_short_edges if edges else lab_short
+    assert any(r.edge_measurements for r in result.records) is edges
 
     ekf = JointEKF(Config().camera(lab_scenario.camera), SimulatedSource(run).initial_pose, result.cov0)
     for rec in result.records:

@@ -44,10 +44,10 @@ from .pipeline import FrameLandmarks, FrontEnd, Regions, check_pair, disparity_l
 from .viewing import choose_pan
 
 DEFAULT_START_COV = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
+"""Covariance of the start pose when none is given: σ = 5 cm, 5 cm, 1° over ``(x, y, theta)``."""
 FOUND_PRIOR = (8.5, 1.5)
 """Pseudo-counts (found, missed) of the rate at which a landmark predicted in view is found, before the run has
 found any (Beta prior, weight of ten landmarks): 85 %, as measured on clean runs of loop, office and hall."""
-"""Covariance of the start pose when none is given: σ = 5 cm, 5 cm, 1° over ``(x, y, theta)``."""
 
 
 @dataclass(kw_only=True)
@@ -656,6 +656,7 @@ class Localizer:
                 self.ekf.remove_landmark(i)
                 self._missed.pop(i, None)
             record.dropped = dropped
+            n_view = len(self.ekf.visible(pan, self._max_incidence)) if assoc else 0
             if len(assoc) == 1 and record.inflation == 1.0:
                 # One line alone cannot be checked against anything: with a 2-D measurement and a 3-D pose, joint
                 # compatibility accepts whatever lies in its gate. While the pose is well known the gate is a few
@@ -666,7 +667,6 @@ class Localizer:
                 # is then likely off (loop: a turn's odometry 4.8° off, 2.9 σ; the one line found near a landmark's
                 # predicted column was its neighbour, NIS 1.65, and held the heading 4.8° off with σ 0.06°).
                 half = lone_gate_px(self.ekf, assoc, pan)
-                n_view = len(self.ekf.visible(pan, self._max_incidence))
                 if half > 2 * self.config.sad.block_size:
                     record.warnings.append(
                         f"landmark {assoc[0][0]} was the only one associated, in a gate of ±{half:.0f} px (more than "
@@ -677,7 +677,6 @@ class Localizer:
                         f"landmark {assoc[0][0]} was the only one of the {n_view} in view associated: not used until "
                         "another one confirms it")
                     assoc = []
-            n_view = len(self.ekf.visible(pan, self._max_incidence)) if assoc else 0
             if 1 < len(assoc) < self.config.health.min_pattern and record.inflation == 1.0:
                 # A small pattern among many landmarks in view: after an odometry error in a turn, two neighbouring
                 # lines can fit two landmarks together (loop: 2 of 8 found, the heading held 4.8° off). Not used

@@ -172,7 +172,8 @@ def observation_factor(pose_key: int, landmark_key: int, camera: StereoCamera, p
 def edge_factor(pose_key: int, camera: StereoCamera, point, measured, cov_uv, cov_point, X_lin):
     """A gtsam ``CustomFactor`` on the ``Pose2`` at ``pose_key``: a free edge of the map at ``point`` (2,) seen at
     ``measured`` ``(u_l, u_r)`` [px] (the filter's ``ekf.edge_updates``), noise ``cov_uv`` plus the map's
-    accuracy ``cov_point`` projected at the pose ``X_lin`` (as the filter took it)."""
+    accuracy ``cov_point`` projected at the frame's estimated pose ``X_lin`` (the filter projected it at its
+    pose just before the edge update; the two differ by that update, nothing when the map is exact)."""
     gtsam = _gtsam()
     z = np.asarray(measured, dtype=float).reshape(2)
     p = np.asarray(point, dtype=float).reshape(1, 2)

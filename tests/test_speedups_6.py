@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 from numba import njit
 
+from stablemarks import landmarks as L
 from stablemarks import planes as P
 from stablemarks.config import Config
 from stablemarks.landmarks import relative_error_model
@@ -340,3 +341,139 @@ def test_detect_and_link_equals_the_reference(scenario_frames):
             got = _detect_and_link(gx, threshold, drift, gap)
             want = detect_and_link_reference(gx, threshold, drift, gap)
             assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
+
+
+# ------------------------------------------------------------------ the planes' regions taken from plane_regions
+def test_plane_regions_keep_what_select_landmarks_would_compute(scenario_frames):
+    """The rectangles and edge windows :func:`plane_regions` keeps are those :func:`select_landmarks` computed from
+    the same predictions; and a frame's model with them taken from the regions equals the one with them computed
+    again (regions without ``shape`` / ``windows``): the same disparity pixels, fits, candidates and selection."""
+    from dataclasses import replace as dc_replace
+
+    from stablemarks.pipeline import edge_windows, plane_regions, prediction_regions, run_front_end, select_landmarks
+
+    config = Config()
+    cov = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
+    for _, _, left, right, camera, world_map, X in scenario_frames:
+        reg = plane_regions(camera, X, cov, world_map, config, left.shape)
+        again = prediction_regions(reg.predictions, left.shape, config)
+        assert reg.shape == left.shape
+        assert np.array_equal(reg.left, again.left) and np.array_equal(reg.right, again.right)
+        assert reg.windows == edge_windows(reg.predictions, config)
+        models = []
+        for regions in (reg, dc_replace(reg, shape=None, windows=None)):
+            front = run_front_end(left, right, config, regions)
+            models.append(select_landmarks(front, camera, world_map, X, cov, config))
+        a, b = models
+        for x, y in zip(a.front.disparity.__dict__.values(), b.front.disparity.__dict__.values(), strict=True):
+            assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f")
+        assert [bool(f) and (f.a, f.b) for f in a.fits] == [bool(f) and (f.a, f.b) for f in b.fits]
+        assert [(c.pair, c.s, c.selected, c.reason) for c in a.candidates] == \
+            [(c.pair, c.s, c.selected, c.reason) for c in b.candidates]
+        assert a.warnings == b.warnings
+
+
+# ------------------------------------------------------------------ the candidates' numbers
+def model_features_reference(
+    camera,
+    fit,
+    boundary,
+    pairs,
+    member_idx,
+    contrast=None,
+    config=None,
+):
+    """The former :func:`~stablemarks.landmarks.model_features`: each candidate's numbers taken one by one with
+    ``float(a[j])``."""
+    config = config or L.LandmarkConfig()
+    plane = fit.plane
+    X = fit.X
+    edge = boundary.edge
+    t = L._inward(plane, edge)
+    P_edge = plane.edge(edge)
+    k = np.asarray(member_idx, dtype=int)
+    P_f, cov_f = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
+    ok = np.all(np.isfinite(P_f), axis=-1)
+    if not ok.any():
+        return []
+    k, P_f, cov_f = k[ok], P_f[ok], cov_f[ok]
+    # Eq 12's innovation before the fusion: is the line on the fitted wall at all?
+    G, J_G_P, J_G_R = fit.constraint(P_f)
+    var_G = np.einsum("i,kij,j->k", J_G_P, cov_f, J_G_P) + np.einsum("ki,ij,kj->k", J_G_R, fit.cov_R, J_G_R)
+    P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
+    d_p = (P_hat - boundary.P) @ t
+    sigma_f = np.sqrt(np.einsum("i,kij,j->k", t, cov_hat, t))
+    var_s = boundary.sigma_along**2 + sigma_f**2
+    tt = np.outer(t, t)
+    Xc, Zc = camera.to_camera(X, P_hat)
+    z_high = camera.heights(pairs.v_top[k], Zc)
+    z_low = camera.heights(pairs.v_bottom[k], Zc)
+    # heights: z = h − (v − c_v) Z / f; σ_z² = (Z σ_v / f)² + ((h − z) σ_Z / Z)²
+    centre = camera.optical_centres(X)[0]
+    ray = P_hat - centre
+    dist = np.hypot(ray[:, 0], ray[:, 1])
+    view = ray / dist[:, None]
+    var_Z = np.einsum("ki,kij,kj->k", view, cov_hat, view)
+    sigma_row_z = Zc * config.row_sigma_px / camera.f
+    h = camera.mount_height
+    span = np.maximum(np.abs(h - z_low), np.abs(h - z_high))
+    margin = config.off_wall_sigma * np.sqrt(sigma_row_z**2 + (span / Zc) ** 2 * var_Z)
+    incidence = np.arccos(np.clip(np.abs(view @ plane.normal), 0.0, 1.0))
+    J_shared, sigma_own, cov_shared = L.relative_error_model(camera, fit, boundary, pairs.u_left[k], pairs.u_right[k],
+                                                           t, config.filter_boundary_sigma == "measured")
+    out = []
+    for rank, j in enumerate(np.argsort(d_p, kind="stable")):
+        i = int(k[j])
+        out.append(
+            L.Candidate(plane.id, plane.label, rank + 1, i, edge, float(d_p[j]), boundary.sigma_along,
+                        float(sigma_f[j]),
+                      P_edge + d_p[j] * t,  # Eq 15
+                      var_s[j] * tt,  # Eq 17: rank 1 along the wall
+                      float(z_low[j]), float(z_high[j]), float(pairs.length_similarity[i]), float(pairs.u_left[i]),
+                      float(pairs.u_right[i]), float(pairs.v_top[i]), float(pairs.v_bottom[i]),
+                      P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured,
+                      contrast=np.inf if contrast is None else float(contrast[i]),
+                      wall_offset=float(G[j]), sigma_wall_offset=float(np.sqrt(var_G[j])),
+                      height_margin=float(margin[j]), range=float(dist[j]), incidence=float(incidence[j]),
+                      shared_jacobian=None if J_shared is None else J_shared[j], shared_cov=cov_shared,
+                      sigma_own=np.nan if J_shared is None else float(sigma_own[j]))
+        )
+    return out
+
+
+def _same_candidate(a, b) -> None:
+    assert a.__dict__.keys() == b.__dict__.keys()
+    for key, x in a.__dict__.items():
+        y = b.__dict__[key]
+        assert type(x) is type(y), key
+        if isinstance(x, np.ndarray):
+            assert np.array_equal(x, y, equal_nan=True), key
+        elif isinstance(x, float):
+            assert x == y or (np.isnan(x) and np.isnan(y)), key
+        else:
+            assert x == y, key
+
+
+def test_model_features_equals_the_reference(scenario_frames, scenario_models):
+    """Every plane's candidates from every boundary found, with and without contrasts, both boundary-σ variants:
+    the same candidates, field by field (values and types)."""
+    from dataclasses import replace as dc_replace
+
+    config = Config()
+    n = 0
+    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
+        camera = config.camera(frame[4])
+        pairs = front.kept_pairs
+        step = front.left_segments.contrast[pairs.left_index] / 4.0
+        for plane in model.planes:
+            idx = np.flatnonzero(plane.members)
+            for b in plane.boundaries:
+                for contrast in (step, None):
+                    for lc in (config.landmarks, dc_replace(config.landmarks, filter_boundary_sigma="measured")):
+                        got = L.model_features(camera, plane.fit, b, pairs, idx, contrast, lc)
+                        want = model_features_reference(camera, plane.fit, b, pairs, idx, contrast, lc)
+                        assert len(got) == len(want)
+                        for x, y in zip(got, want, strict=True):
+                            _same_candidate(x, y)
+                        n += len(got)
+    assert n > 50

@@ -619,21 +619,27 @@ def model_features(
     incidence = np.arccos(np.clip(np.abs(view @ plane.normal), 0.0, 1.0))
     J_shared, sigma_own, cov_shared = relative_error_model(camera, fit, boundary, pairs.u_left[k], pairs.u_right[k],
                                                            t, config.filter_boundary_sigma == "measured")
+    # the per-candidate numbers as Python floats in one conversion per array (``tolist``: the same values as
+    # ``float(a[j])``; the square root of var_G element-wise, as of each element)
+    d_l, sf_l, zl_l, zh_l, G_l, sG_l, m_l, dist_l, inc_l = (
+        a.tolist() for a in (d_p, sigma_f, z_low, z_high, G, np.sqrt(var_G), margin, dist, incidence))
+    ls_l, ul_l, ur_l, vt_l, vb_l = (np.asarray(a, dtype=float)[k].tolist() for a in (
+        pairs.length_similarity, pairs.u_left, pairs.u_right, pairs.v_top, pairs.v_bottom))
+    c_l = [np.inf] * len(k) if contrast is None else np.asarray(contrast, dtype=float)[k].tolist()
+    so_l = [np.nan] * len(k) if J_shared is None else sigma_own.tolist()
+    k_l = k.tolist()
     out = []
-    for rank, j in enumerate(np.argsort(d_p, kind="stable")):
-        i = int(k[j])
+    for rank, j in enumerate(np.argsort(d_p, kind="stable").tolist()):
         out.append(
-            Candidate(plane.id, plane.label, rank + 1, i, edge, float(d_p[j]), boundary.sigma_along, float(sigma_f[j]),
+            Candidate(plane.id, plane.label, rank + 1, k_l[j], edge, d_l[j], boundary.sigma_along, sf_l[j],
                       P_edge + d_p[j] * t,  # Eq 15
                       var_s[j] * tt,  # Eq 17: rank 1 along the wall
-                      float(z_low[j]), float(z_high[j]), float(pairs.length_similarity[i]), float(pairs.u_left[i]),
-                      float(pairs.u_right[i]), float(pairs.v_top[i]), float(pairs.v_bottom[i]),
+                      zl_l[j], zh_l[j], ls_l[j], ul_l[j], ur_l[j], vt_l[j], vb_l[j],
                       P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured,
-                      contrast=np.inf if contrast is None else float(contrast[i]),
-                      wall_offset=float(G[j]), sigma_wall_offset=float(np.sqrt(var_G[j])),
-                      height_margin=float(margin[j]), range=float(dist[j]), incidence=float(incidence[j]),
+                      contrast=c_l[j], wall_offset=G_l[j], sigma_wall_offset=sG_l[j], height_margin=m_l[j],
+                      range=dist_l[j], incidence=inc_l[j],
                       shared_jacobian=None if J_shared is None else J_shared[j], shared_cov=cov_shared,
-                      sigma_own=np.nan if J_shared is None else float(sigma_own[j]))
+                      sigma_own=so_l[j])
         )
     return out
 

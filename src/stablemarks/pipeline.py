@@ -60,13 +60,17 @@ class Regions:
     ``[row0, row1) × [col0, col1)`` of the left image whose left-reference disparity is wanted and of the right
     image whose right-reference disparity is wanted (clipped to the image). ``predictions``: the plane
     predictions they were made from and ``key`` what those were predicted from (:func:`plane_regions`), for
-    :func:`select_landmarks` to take them instead of predicting again from the same prior.
+    :func:`select_landmarks` to take them instead of predicting again from the same prior; ``shape`` the images'
+    (H, W) the rectangles were made for (:func:`prediction_regions`) and ``windows`` the predictions'
+    :func:`edge_windows`, which it then takes too.
     """
 
     left: np.ndarray
     right: np.ndarray
     predictions: list[PlanePrediction] | None = None
     key: tuple | None = field(default=None, repr=False)
+    shape: tuple[int, int] | None = field(default=None, repr=False)
+    windows: list | None = field(default=None, repr=False)
 
     @classmethod
     def none(cls) -> Regions:
@@ -155,8 +159,10 @@ def plane_regions(camera: StereoCamera, X, cov_X, world_map: Map, config: Config
     X = np.asarray(X, dtype=float)
     cov_X = np.asarray(cov_X, dtype=float)
     preds = predict_planes(camera, X, cov_X, world_map, config.planes)
-    out = prediction_regions(preds, shape or (camera.height, camera.width), config)
-    return Regions(out.left, out.right, preds, _prediction_key(camera, X, cov_X, world_map, config))
+    shape = tuple(shape or (camera.height, camera.width))
+    out = prediction_regions(preds, shape, config)
+    return Regions(out.left, out.right, preds, _prediction_key(camera, X, cov_X, world_map, config), shape,
+                   edge_windows(preds, config))
 
 
 def pair_bands(pairs: SegmentPairs, left_segments: Segments, search_radius: int) -> np.ndarray:
@@ -585,15 +591,20 @@ def select_landmarks(
     cov_X = np.asarray(cov_X, dtype=float)
     t0 = time.perf_counter()
     regions = getattr(front, "regions", None)
-    if regions is not None and regions.key is not None and \
-            _same_key(regions.key, _prediction_key(camera, X, cov_X, world_map, config)):
+    same = regions is not None and regions.key is not None and \
+        _same_key(regions.key, _prediction_key(camera, X, cov_X, world_map, config))
+    if same:
         preds = regions.predictions  # predicted from this very prior ahead of the front end (plane_regions)
     else:
         preds = predict_planes(camera, X, cov_X, world_map, config.planes)
     t_disp = 0.0
     if getattr(front, "lazy", None) is not None:  # disparity in regions: compute what the planes read
-        t_disp = front.require(prediction_regions(preds, front.disparity.left.shape, config),
-                               edge_windows(preds, config))
+        if same and regions.shape == front.disparity.left.shape and regions.windows is not None:
+            # what plane_regions made of these predictions for images of this shape: the same rectangles and windows
+            wanted, windows = regions, regions.windows
+        else:
+            wanted, windows = prediction_regions(preds, front.disparity.left.shape, config), edge_windows(preds, config)
+        t_disp = front.require(wanted, windows)
     warnings = []
     if not preds:
         warnings.append("no reference plane of the map is in view of the pose prior")

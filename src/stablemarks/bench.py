@@ -72,16 +72,18 @@ def _pipeline(left, right, camera, world_map, X, cov_X, config, ekf, regions: bo
     """One frame through the pipeline as :meth:`Localizer.step` runs it; the time of each stage [s]."""
     from .pipeline import plane_regions, run_front_end, select_landmarks
 
+    # a fresh copy of the filter for this run's update, made before timing: the localizer updates its own filter
+    # in place, it does not copy it every frame
+    e = ekf.copy() if ekf is not None and ekf.n_landmarks else None
     t0 = time.perf_counter()
     reg = plane_regions(camera, X, cov_X, world_map, config, left.shape) if regions else None
     t1 = time.perf_counter()
     front = run_front_end(left, right, config, reg)
     model = select_landmarks(front, camera, world_map, X, cov_X, config)
     t2 = time.perf_counter()
-    if ekf is not None and ekf.n_landmarks:
+    if e is not None:
         pairs = front.kept_pairs
         measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
-        e = ekf.copy()
         chosen = e.select_for_update(e.associate_joint(measured, 0.0))
         e.update([(i, measured[j]) for i, j in chosen])
     t3 = time.perf_counter()

@@ -23,6 +23,7 @@ from stablemarks.landmarks import (
     Candidate,
     LandmarkConfig,
     _boundary_columns,
+    edge_incidence,
     edge_occluded,
     select,
     wall_columns,
@@ -297,3 +298,35 @@ def test_boundary_columns_hole_sizes_and_window_border():
     r[0, 0:30] = True
     assert _boundary_columns(r, 10, 30, 1, 2)[1].tolist() == [29.0]
     assert len(_boundary_columns(r, 10, 29, 1, 2)[0]) == 0
+
+
+# ------------------------------------------------------------- edge_incidence
+def test_edge_incidence_is_the_angle_from_the_walls_normal():
+    camera = StereoCamera()
+    plane = ReferencePlane("w", (-1.0, 4.0), (1.0, 4.0), free_edges=("p1", "p2"))
+    X = np.array([-1.0, 0.0, np.pi / 2])  # straight in front of p1, 4 m away
+    assert edge_incidence(camera, X, plane, "p1") == pytest.approx(0.0, abs=1e-12)
+    assert edge_incidence(camera, X, plane, "p2") == pytest.approx(np.arctan2(2.0, 4.0))
+
+
+def test_a_free_edge_seen_more_obliquely_than_the_entry_limit_is_not_searched():
+    """A side wall running away from the camera: its far end is seen 79° from the wall's normal, beyond
+    ``landmarks.max_incidence_deg`` (60°), so no boundary is searched there and nothing is placed from it; the
+    log says why. With the limit raised the same end is searched."""
+    walls = [{"id": "side", "p1": [0.8, 1.0], "p2": [0.8, 4.0], "z": [0.0, 1.8], "free_edges": ["p2"],
+              "texture": TEXTURE}, BACK]
+    features = [{"id": "f", "wall": "side", "s": 1.5, "z": [0.4, 1.4], "kind": "edge", "contrast": 60, "fade": 0.3}]
+    sc = _scene(walls, features, {"x": 0.0, "y": 0.0, "theta_deg": 90.0})
+    X = np.array([0.0, 0.0, np.pi / 2])
+    assert np.degrees(edge_incidence(sc.camera, X, sc.map["side"], "p2")) == pytest.approx(78.7, abs=0.1)
+    cov = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
+    frame = render_stereo(sc, X, 0.0, np.random.default_rng(0))
+    front = run_front_end(frame.left, frame.right)
+    res = select_landmarks(front, sc.camera, sc.map, X, cov)
+    side = [m for m in res.planes if m.fit.plane.id == "side"]
+    assert side, "the side wall is fitted"
+    assert side[0].searched == [] and side[0].boundaries == [] and not side[0].candidates
+    assert any("p2 is seen 79° from the wall's normal" in why and "not searched" in why
+               for _, why in side[0].rejected_boundaries)
+    wide = select_landmarks(front, sc.camera, sc.map, X, cov, Config(landmarks=LandmarkConfig(max_incidence_deg=85.0)))
+    assert [m.searched for m in wide.planes if m.fit.plane.id == "side"] == [["p2"]]

@@ -119,7 +119,9 @@ class LandmarkConfig:
     half-hides lines behind nearer walls. Measured as above: 5–9 mm RMS along the wall below 60°, 63 mm at
     60–70°, 149 mm at 70–80° (up to 0.54 m, several σ: the errors behind the loop's drifting landmarks). The
     same limit keeps a landmark already in the filter from being associated while its wall is seen more
-    obliquely (:meth:`~stablemarks.estimation.JointEKF.visible`)."""
+    obliquely (:meth:`~stablemarks.estimation.JointEKF.visible`), and a free edge seen more obliquely from the
+    mean pose from being searched at all: its boundary is a line on the wall like the others, and every landmark
+    placed from it would carry its error."""
     boundary_gate_sigma: float = 3.0
     """A found boundary farther along the wall from the map's free edge than this many σ (its own σ and the
     pose's, projected on the wall) disagrees with the map: nothing is modelled from it in that frame. The same
@@ -873,6 +875,15 @@ def landmarks_on_plane(
             not (vc[0] + 1 < w[0] and w[1] < vc[1] - 1) for w, vc in zip(windows, valid_columns, strict=True)
         ):
             continue
+        incidence = edge_incidence(camera, fit.X, fit.plane, edge)
+        if incidence > math.radians(config.max_incidence_deg):
+            # the limit of the lines modelled from a boundary holds for the boundary too: its column error is
+            # stretched along the wall as much, and every landmark placed from it inherits that error (a warehouse
+            # aisle: an end seen at 72° placed its wall's landmarks 12–17 cm off, with σ of a few cm)
+            rejected.append((None, f"plane {fit.plane.label!r}: its free edge {edge} is seen "
+                                   f"{np.degrees(incidence):.0f}° from the wall's normal (more than "
+                                   f"landmarks.max_incidence_deg, {config.max_incidence_deg:g}°): not searched"))
+            continue
         if world_map is not None:
             if edge_occluded(camera, fit.X, world_map, fit.plane, edge):
                 continue
@@ -1283,6 +1294,16 @@ def other_wall_beyond(camera: StereoCamera, fit: PlaneFit, world_map: Map, edge:
     d = np.where(np.isfinite(Z) & (Z > 0), camera.f * camera.baseline / np.where(Z > 0, Z, 1.0), 0.0)
     d_edge, sigma = fit.prediction.disparity_at(u_e)
     return bool(np.any(np.abs(d - d_edge) <= fit.prediction.gate * sigma + 1.0))
+
+
+def edge_incidence(camera: StereoCamera, X, plane, edge: str) -> float:
+    """Angle [rad] between the left camera's viewing ray to the wall's end ``edge`` (from pose ``X``) and the
+    wall's normal: 0 seen head-on, π/2 along the wall."""
+    ray = plane.edge(edge) - camera.optical_centres(X)[0]
+    norm = float(np.hypot(ray[0], ray[1]))
+    if norm == 0.0:
+        return math.pi / 2
+    return math.acos(min(1.0, abs(float(ray @ plane.normal)) / norm))
 
 
 def edge_occluded(camera: StereoCamera, X, world_map: Map, plane, edge: str) -> bool:

@@ -50,12 +50,12 @@ def entry_groups(name: str, trials: int, frames: int | None, config: Config) -> 
         source.steer(loc.command_pan)
         for frame in source:
             est = loc.step(frame.stamp, frame.left, frame.right, odometry=frame.odometry, pan=frame.pan)
-            for ids, values, cov in est.record.landmark_priors:
+            for ids, _values, cov in est.record.landmark_priors:
                 cov = np.asarray(cov, dtype=float)
                 if cov.shape != (len(ids), len(ids)):
                     continue  # point landmarks (two dimensions each)
                 errors = []
-                for lid, s in zip(ids, values, strict=True):
+                for lid in ids:
                     plane = loc.ekf.landmark_plane(lid)
                     if plane is None:
                         break

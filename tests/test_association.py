@@ -293,3 +293,18 @@ def test_a_lone_association_reports_its_gate_only_when_alone():
     assert lone_gate_px(tight, [(a, 0), (b, 1)], 0.0) == 0.0  # two can be checked against each other
     # at 4 m a 6° heading σ spans tens of pixels, a 0.5° one a few
     assert lone_gate_px(wide, [(a, 0)], 0.0) > 50.0 > 30.0 > lone_gate_px(tight, [(a, 0)], 0.0)
+
+
+def test_associations_within_one_sad_window_count_as_one_line():
+    """Two associations whose lines lie within ``within`` px of each other (the two edges of a narrow bar) are one
+    line to the pose: the widest of their gates is reported, as for a lone one; lines farther apart are not."""
+    from stablemarks.estimation.association import lone_gate_px
+
+    wide = _ekf(s=(0.9, 1.3), polarity=(0, 0), ekf=JointEKF(CAMERA, X0, WIDE))
+    a, b = wide.landmark_ids
+    alone = max(lone_gate_px(wide, [(a, 0)], 0.0), lone_gate_px(wide, [(b, 1)], 0.0))
+    close, apart = np.array([300.0, 310.0]), np.array([300.0, 360.0])
+    assert lone_gate_px(wide, [(a, 0), (b, 1)], 0.0, close, 15.0) == pytest.approx(alone)
+    assert lone_gate_px(wide, [(a, 0), (b, 1)], 0.0, apart, 15.0) == 0.0
+    assert lone_gate_px(wide, [(a, 0), (b, 1)], 0.0, close, 5.0) == 0.0
+    assert lone_gate_px(wide, [(a, 0), (b, 1)], 0.0) == 0.0  # without the lines' columns: two lines

@@ -201,3 +201,25 @@ def test_free_edges_found_again_update_the_pose_unless_outside_their_gate(lab_se
     monkeypatch.setattr(loc, "_update_edges", shifted)
     est = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
     assert est.record.edge_measurements == []
+
+
+@pytest.mark.parametrize("gate_px, used", [(100.0, False), (0.0, True)])
+def test_two_landmarks_on_one_line_in_a_wide_gate_wait_for_another(lab_seq, monkeypatch, gate_px, used):
+    """Two associations whose lines lie within one SAD window of each other are one line to the pose: in a gate
+    wider than two windows (after a blind stretch) they are not used, as a lone one is not (the gate and the lines'
+    spacing are :func:`lone_gate_px`'s, tested in test_association)."""
+    import stablemarks.localizer as localizer_module
+
+    seq = sm.open_sequence(lab_seq)
+    frames = list(seq)
+    config = sm.Config().with_overrides({"health": {"few_found_p": 0.0}})
+    loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=config)
+    for f in frames[:-1]:
+        loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
+    f = frames[-1]
+    real = loc.method.associate
+    monkeypatch.setattr(loc.method, "associate", lambda *a, **k: real(*a, **k)[:2])
+    monkeypatch.setattr(localizer_module, "lone_gate_px", lambda ekf, pairs, *a: gate_px if len(pairs) == 2 else 0.0)
+    est = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
+    assert (len(est.record.observed) == 2) is used
+    assert any("were the only ones associated, their lines within one" in w for w in est.record.warnings) is not used

@@ -657,6 +657,18 @@ class Localizer:
                 self._missed.pop(i, None)
             record.dropped = dropped
             n_view = len(self.ekf.visible(pan, self._max_incidence)) if assoc else 0
+            block = self.config.sad.block_size
+            one_line = lone_gate_px(self.ekf, assoc, pan, front.kept_pairs.u_left, block) \
+                if 0 < len(assoc) < self.config.health.min_pattern and record.inflation == 1.0 else 0.0
+            if len(assoc) > 1 and one_line > 2 * block:
+                # Two landmarks whose lines lie within one SAD window of each other (aisle: two edges 4 cm apart, 3 m
+                # away, after 22 blind frames with the heading 12° off) are one line to the pose, with the same
+                # ambiguity as a lone one below; their update held the position 0.27 m off with σ 3 cm.
+                ids = ", ".join(str(i) for i, _ in assoc)
+                record.warnings.append(
+                    f"landmarks {ids} were the only ones associated, their lines within one {block} px SAD window of "
+                    f"each other, in a gate of ±{one_line:.0f} px: not used until another line confirms them")
+                assoc = []
             if len(assoc) == 1 and record.inflation == 1.0:
                 # One line alone cannot be checked against anything: with a 2-D measurement and a 3-D pose, joint
                 # compatibility accepts whatever lies in its gate. While the pose is well known the gate is a few
@@ -666,8 +678,8 @@ class Localizer:
                 # Nor when several landmarks were predicted in view and none of the others was found: the prediction
                 # is then likely off (loop: a turn's odometry 4.8° off, 2.9 σ; the one line found near a landmark's
                 # predicted column was its neighbour, NIS 1.65, and held the heading 4.8° off with σ 0.06°).
-                half = lone_gate_px(self.ekf, assoc, pan)
-                if half > 2 * self.config.sad.block_size:
+                half = one_line
+                if half > 2 * block:
                     record.warnings.append(
                         f"landmark {assoc[0][0]} was the only one associated, in a gate of ±{half:.0f} px (more than "
                         f"two {self.config.sad.block_size} px SAD windows): not used until another one confirms it")

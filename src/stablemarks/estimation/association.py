@@ -114,14 +114,24 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     return sorted(chosen, key=lambda q: q[1])
 
 
-def lone_gate_px(ekf: JointEKF, pairs: list[tuple[int, int]], pan: float) -> float:
-    """Half-width [px] of the 3σ gate of the left column of a frame's only association (0 when ``pairs`` holds
-    none or several). A single pair cannot be checked against anything (a 2-D measurement, a 3-D pose: joint
-    compatibility accepts whatever lies in the gate), so the wider that gate, the likelier it holds a neighbour
-    of a line that was not found."""
-    if len(pairs) != 1:
+def lone_gate_px(ekf: JointEKF, pairs: list[tuple[int, int]], pan: float, columns=None, within: float = 0.0) -> float:
+    """Half-width [px] of the widest 3σ gate of the left columns of a frame's associations when they amount to
+    one line: a single pair, or (with the lines' left ``columns`` indexed by pair) pairs whose lines all lie
+    within ``within`` px of each other (the two edges of one narrow bar, or one edge found twice); 0 otherwise.
+    One line cannot be checked against anything (a 2-D measurement, a 3-D pose: joint compatibility accepts
+    whatever lies in the gate), and lines closer than a SAD window are measured from overlapping windows and move
+    together with a shift of the pattern, so the wider that gate, the likelier it holds a neighbour of a line
+    that was not found."""
+    if not pairs:
         return 0.0
-    return 3.0 * float(np.sqrt(ekf.predict_observation([pairs[0][0]], pan).S[0, 0, 0]))
+    if len(pairs) > 1:
+        if columns is None:
+            return 0.0
+        u = [float(columns[j]) for _, j in pairs]
+        if max(u) - min(u) > within:
+            return 0.0
+    S = ekf.predict_observation([i for i, _ in pairs], pan).S
+    return 3.0 * float(np.sqrt(np.max(S[:, 0, 0])))
 
 
 def _conflict(a: list[tuple[int, int]], b: list[tuple[int, int]]) -> bool:

@@ -31,7 +31,7 @@ from numba import njit
 from .errors import InputError, expected
 from .geometry import StereoCamera
 from .maps import Map, ray_distances, segments_block
-from .planes import PlaneConfig, PlaneFit, _fuse_points, median, plane_members
+from .planes import PlaneConfig, PlaneFit, median, plane_members
 
 REASON_NEAR_BOUNDARY = "near boundary"
 REASON_LENGTH = "low length similarity"
@@ -685,14 +685,11 @@ def relative_error_model(camera: StereoCamera, fit: PlaneFit, boundary: Boundary
     F[6] -= step_line * nrm
     B[5] += step_line * nrm
     B[6] -= step_line * nrm
-    # the slope's two steps: PlaneFit.fuse_point of a copy of the fit with b ± h, without building the copies
-    # (_fuse_points of the same arrays and numbers: the same values)
+    # the slope's two steps: the line turned to b ± h (PlaneFit.fuse_point's ``b``, without copies of the fit)
     slope = []
-    plane, cov_R = fit.plane, np.asarray(fit.cov_R, dtype=float)
-    P_b0, cov_b0 = P_b[0].reshape(1, 2), cov_b[0].reshape(1, 2, 2)
     for h in (step_line, -step_line):
-        line = (plane.P1, plane.direction, plane.normal, float(fit.a), float(fit.b + h), float(fit.s0), cov_R)
-        slope.append((_fuse_points(P_f[0], cov_f[0], *line)[0] - _fuse_points(P_b0, cov_b0, *line)[0][0]) @ t)
+        slope.append((fit.fuse_point(P_f[0], cov_f[0], b=fit.b + h)[0]
+                      - fit.fuse_point(P_b[0], cov_b[0], b=fit.b + h)[0]) @ t)
     base_b = B[0]
     J = np.empty((n_f, 4))
     J[:, 0] = ((F[5] - B[5]) @ t - (F[6] - B[6]) @ t) / (2 * step_line)

@@ -307,12 +307,13 @@ class PlaneFit:
         J_G_R = np.stack([np.full_like(ds, -1.0), -ds], axis=-1)
         return G, J_G_P, J_G_R
 
-    def fuse_point(self, P, cov_P) -> tuple[np.ndarray, np.ndarray]:
+    def fuse_point(self, P, cov_P, b: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Combine triangulated points with the fitted plane by one Kalman update each (Eqs 12–14).
 
         ``Y = H L + V`` with ``H = ∂G/∂L`` and ``Σ_V = G_R Σ_R G_Rᵀ`` (Eq 14); the covariance uses the Joseph
         form. ``G`` is linear in ``L``, so one update is exact. ``P`` (..., 2), ``cov_P`` (..., 2, 2);
-        returns ``(P̂, Σ̂)`` of the same shapes in the world frame.
+        returns ``(P̂, Σ̂)`` of the same shapes in the world frame. ``b``: fuse with the same line turned to
+        this slope instead of the fit's (a derivative's step, without a copy of the fit).
         """
         P = np.asarray(P, dtype=float)
         cov_P = np.asarray(cov_P, dtype=float)
@@ -329,7 +330,8 @@ class PlaneFit:
             flat_cov = np.broadcast_to(cov_P, (*shape, 2, 2)).reshape(n, 2, 2)
         plane = self.plane
         P_hat, cov_hat = _fuse_points(flat_P, flat_cov, plane.P1, plane.direction, plane.normal, float(self.a),
-                                      float(self.b), float(self.s0), np.asarray(self.cov_R, dtype=float))
+                                      float(self.b if b is None else b), float(self.s0),
+                                      np.asarray(self.cov_R, dtype=float))
         return P_hat.reshape(*shape, 2), cov_hat.reshape(*shape, 2, 2)
 
     def point_on_line(self, s) -> np.ndarray:

@@ -16,79 +16,24 @@ from stablemarks.landmarks import relative_error_model
 
 
 # ------------------------------------------------------------------ the plane fit's reweighting steps
+def reweight_numpy(s, o, sigma_o, w_all, inl, a, b, s0, outlier_sigma):
+    """The NumPy expressions :func:`~stablemarks.planes._reweight` replaced in :func:`~stablemarks.planes.fit_plane`'s
+    reweighting loop."""
+    res = (o - a - b * (s - s0)) / sigma_o
+    scale = max(1e-3, 1.4826 * P.median(np.abs(res[inl])))
+    inl = np.abs(res) <= outlier_sigma * scale
+    return scale, inl, w_all[inl], s[inl], o[inl]
+
+
 def fit_plane_reference(camera, X, disparity, prediction, config):
-    """The former :func:`~stablemarks.planes.fit_plane`: the reweighting steps as NumPy expressions."""
-    plane = prediction.plane
-    rows, cols, band = prediction.band_box(disparity, config.row_margin_px)
-    n = int(np.count_nonzero(band))
-    if n < config.min_pixels:
-        return P.FailedFit(plane, f"{n} disparity pixels in the predicted band (need {config.min_pixels})", n)
-    if np.count_nonzero(band.any(axis=0)) < config.min_columns:
-        return P.FailedFit(plane, "band pixels span too few columns", n)
-    # Every pixel of the band's box in the wall frame, placed with the mean pose: the left pixel at column
-    # u with depth Z is at c + Z r(u), r(u) = fwd + (u − cu)/f · right the world direction of unit depth.
-    X = np.asarray(X, dtype=float)
-    cam = camera.camera_pose(X)
-    fwd = np.array([np.cos(cam.theta), np.sin(cam.theta)])
-    right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
-    r = fwd + ((prediction.columns - camera.cu) / camera.f)[:, None] * right  # (K, 2)
-    r_s, r_o = r @ plane.direction, r @ plane.normal
-    c_s, c_o = float(plane.along(cam.translation)), float(plane.offset(cam.translation))
-    fb = camera.f * camera.baseline
-    # Fit on every other row and column (neighbouring pixels share their SAD window anyway), then
-    # classify every band pixel with the final line.
-    disp = disparity[rows, cols]
-    frame = (r_s, r_o, c_s, c_o, fb, config.sigma_nu(camera))
-    if np.count_nonzero(band[rows.start % 2 :: 2, cols.start % 2 :: 2]) < config.min_pixels // 4:
-        s, o, sigma_o = P._wall_points(disp, band, 0, 0, 1, *frame)
-    else:
-        s, o, sigma_o = P._wall_points(disp, band, rows.start % 2, cols.start % 2, 2, *frame)
-    w_all = 1.0 / sigma_o**2
-    # Robust start: the median offset, then reweighted least squares with outlier rejection.
-    inl = np.ones(len(s), dtype=bool)
-    a, b = P.median(o), 0.0
-    s0 = P.median(s)
-    scale = 1.0
-    min_inliers = max(3, len(s) * config.min_pixels // (2 * n))
-    for _ in range(4):
-        res = (o - a - b * (s - s0)) / sigma_o
-        # the data's own spread, not the model's σ: disparity noise is often below σ_ν, and clutter
-        # a few tens of cm in front of a wall is then still separable
-        scale = max(1e-3, 1.4826 * P.median(np.abs(res[inl])))
-        inl = np.abs(res) <= config.outlier_sigma * scale
-        if np.count_nonzero(inl) < min_inliers:
-            return P.FailedFit(plane, "too few pixels agree on one wall line", n)
-        wgt, s_in, o_in = w_all[inl], s[inl], o[inl]
-        sum_w = float(wgt.sum())
-        s0 = float(wgt @ s_in) / sum_w
-        ds = s_in - s0
-        w_ds = wgt * ds
-        N = np.array([[sum_w, w_ds.sum()], [w_ds.sum(), w_ds @ ds]])
-        N_inv = P._inverse_spd2(N)
-        if N_inv is None:
-            return P.FailedFit(plane, "wall seen over too short a span to fit", n)
-        a, b = (float(v) for v in N_inv @ np.array([wgt @ o_in, w_ds @ o_in]))
-    res = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
-    chi2_dof = float(res @ res) / max(1, int(np.count_nonzero(inl)) - 2)
-    # one independent measurement per `correlation_px` pixels of the full band (the subsample carries
-    # len(s)/n of its information). The residuals are correlated down the column as well (13–14 px either way
-    # with 15 px windows, measured on the simulator's walls); counting one measurement per window area, with
-    # the residuals' own spread, was tried (December 2026, with the snapped boundary's σ taken from its line)
-    # and made the whole filter more cautious, not more consistent (room's pose NEES 3.1 → 1.5, 20 trials): the
-    # landmarks it feeds are already held less certain than their errors, by the boundary's σ. Not adopted.
-    cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
-    if config.disparity_bias_px > 0:
-        # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,
-        # o − c_o), Z the pixel's depth; the line (a, b) follows through the weighted least squares
-        depth = (s_in - c_s) * (fwd @ plane.direction) + (o_in - c_o) * (fwd @ plane.normal)
-        g = -(depth / fb) * ((o_in - c_o) - b * (s_in - c_s))
-        J_beta = N_inv @ np.array([wgt @ g, w_ds @ g])
-        cov_R = cov_R + config.disparity_bias_px**2 * np.outer(J_beta, J_beta)
-    keep = P._on_line(disp, band, *frame, a, b, s0, config.outlier_sigma * scale)
-    region = np.zeros(disparity.shape, dtype=bool)
-    region[rows, cols] = keep
-    return P.PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, int(np.count_nonzero(keep)),
-                    chi2_dof, X, (rows, cols))
+    """The former :func:`~stablemarks.planes.fit_plane`: the same function with its reweighting step as the NumPy
+    expressions it was (:func:`reweight_numpy`), not a copy of the rest."""
+    fast = P._reweight
+    P._reweight = reweight_numpy
+    try:
+        return P.fit_plane(camera, X, disparity, prediction, config)
+    finally:
+        P._reweight = fast
 
 
 def _same_fit(a, b) -> None:
@@ -147,61 +92,31 @@ def test_reweight_equals_numpy_on_random_points():
         a, b, s0 = float(rng.normal(0, 0.01)), float(rng.normal(0, 0.01)), float(rng.normal())
         k = float(rng.choice([2.0, 3.0, 3.5]))
         scale, new, wgt, s_in, o_in = P._reweight(s, o, sigma_o, w_all, inl, a, b, s0, k)
-        res = (o - a - b * (s - s0)) / sigma_o
-        ref_scale = max(1e-3, 1.4826 * P.median(np.abs(res[inl])))
-        ref_inl = np.abs(res) <= k * ref_scale
+        ref_scale, ref_inl, ref_wgt, ref_s, ref_o = reweight_numpy(s, o, sigma_o, w_all, inl, a, b, s0, k)
         assert scale == ref_scale
         assert np.array_equal(new, ref_inl)
-        for x, y in ((wgt, w_all[ref_inl]), (s_in, s[ref_inl]), (o_in, o[ref_inl])):
+        for x, y in ((wgt, ref_wgt), (s_in, ref_s), (o_in, ref_o)):
             assert np.array_equal(x, y)
 
 
 # ------------------------------------------------------------------ the relative model's slope steps
-def relative_error_model_reference(camera, fit, boundary, u_left, u_right, t,
-                         measured: bool = False, step_px: float = 0.01, step_line: float = 1e-4):
-    """The former :func:`~stablemarks.landmarks.relative_error_model`: the slope's steps through copies of the
-    fit (``dataclasses.replace``) and :meth:`PlaneFit.fuse_point`."""
-    cov_ub = boundary.cov_uv_measured if measured and boundary.cov_uv_measured is not None else boundary.cov_uv
-    if cov_ub is None:
-        return None, None, None
-    X = fit.X
-    n_f = len(np.atleast_1d(u_left))
-    u_f = np.stack([np.asarray(u_left, dtype=float).ravel(), np.asarray(u_right, dtype=float).ravel()], axis=-1)
-    steps = np.array([[0.0, 0.0], [step_px, 0.0], [-step_px, 0.0], [0.0, step_px], [0.0, -step_px]])  # (5, 2)
-    uf = u_f[None, :, :] + steps[:, None, :]  # (5, n, 2): base, ±u_l, ±u_r
-    ub = np.asarray(boundary.u, dtype=float)[None, :] + steps  # (5, 2)
-    P_f, cov_f = camera.triangulate(uf[..., 0], uf[..., 1], X)  # (5, n, 2)
-    P_b, cov_b = camera.triangulate(ub[:, 0], ub[:, 1], X, cov_uv=cov_ub)  # (5, 2)
-    nrm = fit.plane.normal
-    # the base line on: every column variant, and the base columns moved ∓h along the normal (a ± h)
-    hf = np.stack([P_f[0] - step_line * nrm, P_f[0] + step_line * nrm])  # (2, n, 2)
-    hb = np.stack([P_b[0] - step_line * nrm, P_b[0] + step_line * nrm])  # (2, 2)
-    cov_hf = np.broadcast_to(cov_f[0], hf.shape + (2,))
-    cov_hb = np.broadcast_to(cov_b[0], hb.shape + (2,))
-    F, _ = fit.fuse_point(np.concatenate([P_f, hf]), np.concatenate([cov_f, cov_hf]))
-    B, _ = fit.fuse_point(np.concatenate([P_b, hb]), np.concatenate([cov_b, cov_hb]))
-    F[5] += step_line * nrm
-    F[6] -= step_line * nrm
-    B[5] += step_line * nrm
-    B[6] -= step_line * nrm
-    slope = []
-    for h in (step_line, -step_line):
-        line = replace(fit, b=fit.b + h)
-        slope.append((line.fuse_point(P_f[0], cov_f[0])[0] - line.fuse_point(P_b[0], cov_b[0])[0]) @ t)
-    base_b = B[0]
-    J = np.empty((n_f, 4))
-    J[:, 0] = ((F[5] - B[5]) @ t - (F[6] - B[6]) @ t) / (2 * step_line)
-    J[:, 1] = (slope[0] - slope[1]) / (2 * step_line)
-    J[:, 2] = ((F[0] - B[1]) @ t - (F[0] - B[2]) @ t) / (2 * step_px)
-    J[:, 3] = ((F[0] - B[3]) @ t - (F[0] - B[4]) @ t) / (2 * step_px)
-    own = (((F[1] - base_b) @ t - (F[2] - base_b) @ t) / (2 * step_px) * camera.sigma_img) ** 2
-    own += (((F[3] - base_b) @ t - (F[4] - base_b) @ t) / (2 * step_px) * camera.sigma_img) ** 2
-    cov_shared = np.zeros((4, 4))
-    cov_shared[:2, :2] = fit.cov_R
-    cov_shared[2:, 2:] = cov_ub
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(own))):
-        return None, None, None
-    return J, np.sqrt(own), cov_shared
+class _CopyingFit:
+    """A fit whose :meth:`fuse_point` with another slope goes through a copy of the fit
+    (``dataclasses.replace``), as :func:`~stablemarks.landmarks.relative_error_model`'s slope steps did."""
+
+    def __init__(self, fit):
+        self._fit = fit
+
+    def __getattr__(self, name):
+        return getattr(self._fit, name)
+
+    def fuse_point(self, P, cov_P, b=None):
+        return (self._fit if b is None else replace(self._fit, b=b)).fuse_point(P, cov_P)
+
+
+def relative_error_model_reference(camera, fit, boundary, u_left, u_right, t, measured: bool = False):
+    """The former :func:`~stablemarks.landmarks.relative_error_model`: the slope's steps through copies of the fit."""
+    return relative_error_model(camera, _CopyingFit(fit), boundary, u_left, u_right, t, measured)
 
 
 def test_relative_error_model_equals_the_reference(scenario_frames, scenario_models):

@@ -995,22 +995,20 @@ def _sad_kernel(  # pragma: no cover - numba
         prrun = plan_r[1][plan_r[0][y] : plan_r[0][y + 1]]
         same = planned and _same_runs(plrun, prev_l) and _same_runs(prrun, prev_r)
         if not same:
-            # about the columns the row's costs need: each run widened by the disparity range; from three quarters
-            # of the row on (many runs), the dense plan, whose loops are the longest and which the next rows keep
+            # the row's plan; from three quarters of the dense row's costs on (the lanes of its segments, the runs'
+            # needs overlapping counted once), the dense plan, whose loops are the longest and which the next rows
+            # keep
+            n_seg, n_cs = _plan_row(plrun, prrun, r, min_disp, n_disp, n_cols, need_lo, need_hi, full, segs,
+                                    cs_lo, cs_hi, csegs)  # fmt: skip
             work = 0
-            for t in range(plrun.shape[0]):
-                work += plrun[t, 1] - plrun[t, 0] + n_disp - 1
-            for t in range(prrun.shape[0]):
-                work += prrun[t, 1] - prrun[t, 0] + n_disp - 1
-            if 4 * work >= 3 * (n_cols - 2 * r):
-                if not dense_plan:
-                    n_seg, n_cs = _plan_row(every, every, r, min_disp, n_disp, n_cols, need_lo, need_hi, full, segs,
-                                            cs_lo, cs_hi, csegs)  # fmt: skip
+            for s in range(n_seg):
+                work += (segs[s, 1] - segs[s, 0]) * (segs[s, 3] - segs[s, 2])
+            if 4 * work >= 3 * (n_cols - 2 * r) * n_disp:
+                n_seg, n_cs = _plan_row(every, every, r, min_disp, n_disp, n_cols, need_lo, need_hi, full, segs,
+                                        cs_lo, cs_hi, csegs)  # fmt: skip
                 same = planned and dense_plan
                 dense_plan = True
             else:
-                n_seg, n_cs = _plan_row(plrun, prrun, r, min_disp, n_disp, n_cols, need_lo, need_hi, full, segs,
-                                        cs_lo, cs_hi, csegs)  # fmt: skip
                 dense_plan = False
             planned = True
             prev_l, prev_r = plrun, prrun

@@ -193,6 +193,8 @@ class StereoCamera:
         """
         p = np.asarray(points, dtype=float)
         cx, cy, _, c, s = self._frame(X)
+        if not jacobians and p.shape == (2,):
+            return self._project_point(float(p[0]) - cx, float(p[1]) - cy, c, s)
         dx = p[..., 0] - cx
         dy = p[..., 1] - cy
         Xc = s * dx - c * dy
@@ -223,6 +225,16 @@ class StereoCamera:
         J_I_X[..., 0, 2] = dul_dXc * dXc_dth + dul_dZc * dZc_dth
         J_I_X[..., 1, 2] = dul_dXc * dXc_dth + dur_dZc * dZc_dth
         return uv, J_I_X, J_I_p
+
+    def _project_point(self, dx: float, dy: float, c: float, s: float) -> np.ndarray:
+        """:meth:`project_columns` of one point (2,) without Jacobians, ``(dx, dy)`` its offset from the left optical
+        centre: the same operations in the same order on Python floats (IEEE doubles, as NumPy's), without the
+        array temporaries of the general case (it is called for single points a few dozen times a frame)."""
+        Xc = s * dx - c * dy
+        Zc = c * dx + s * dy
+        Zs = Zc if Zc > MIN_DEPTH else math.nan
+        ul = self.cu + self.f * Xc / Zs
+        return np.array([ul, ul - self.f * self.baseline / Zs])
 
     def project_line(self, X, L, *, jacobians: bool = False):
         """Project a vertical line landmark ``L = (x, y, z_low, z_high)`` (Eq 1) into ``(u_l, u_r, v_top, v_bottom)``.

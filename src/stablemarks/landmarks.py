@@ -1136,27 +1136,38 @@ SLOPE_GATE_CHI2 = 10.83
 def seen_wall_jacobian(camera: StereoCamera, fit: PlaneFit) -> np.ndarray:
     """``J = ∂(a, b)/∂X`` (2, 3): how an error of the pose moves the map's wall as the camera sees it placed with
     the belief ``fit.X`` (offset ``a`` at ``fit.s0`` [m] and slope ``b`` of the line in the wall's frame), by
-    central differences: the wall carried into the camera frame by one pose and back out by another."""
+    central differences: the wall carried into the camera frame by one pose and back out by another.
+
+    On Python floats (two points, six poses: NumPy's small-array overhead was ~0.14 ms a call); the same
+    operations as the array expressions it replaced, the wall frame's dot products summed left to right."""
     plane, X = fit.plane, np.asarray(fit.X, dtype=float)
-    P = plane.point_at(np.array([fit.s0 - 1.0, fit.s0 + 1.0]))
-    c0 = camera.camera_pose(X)
-    d = P - c0.translation
-    cs, sn = np.cos(c0.theta), np.sin(c0.theta)
-    q = np.stack([cs * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + cs * d[:, 1]], axis=-1)  # camera frame
+    p1x, p1y = (float(v) for v in plane.P1)
+    tx, ty = (float(v) for v in plane.direction)
+    nx, ny = (float(v) for v in plane.normal)
+    s0 = float(fit.s0)
+    cx, cy, psi, cs, sn = camera._frame(X)
+    q = []
+    for s in (s0 - 1.0, s0 + 1.0):  # two points of the wall, in the camera frame
+        dx, dy = (p1x + s * tx) - cx, (p1y + s * ty) - cy
+        q.append((cs * dx + sn * dy, -sn * dx + cs * dy))
 
     def seen(Xp):
-        c1 = camera.camera_pose(Xp)
-        c, s_ = np.cos(c1.theta), np.sin(c1.theta)
-        Q = c1.translation + np.stack([c * q[:, 0] - s_ * q[:, 1], s_ * q[:, 0] + c * q[:, 1]], axis=-1)
-        o, t = plane.offset(Q), plane.along(Q)
+        x, y, _, c, s_ = camera._frame(Xp)
+        o, t = [], []
+        for q0, q1 in q:
+            rx, ry = (x + (c * q0 - s_ * q1)) - p1x, (y + (s_ * q0 + c * q1)) - p1y
+            o.append(rx * nx + ry * ny)
+            t.append(rx * tx + ry * ty)
         b = (o[1] - o[0]) / (t[1] - t[0])
-        return np.array([o[0] + b * (fit.s0 - t[0]), b])
+        return o[0] + b * (s0 - t[0]), b
 
     J = np.empty((2, 3))
     for i, h in enumerate((1e-4, 1e-4, 1e-5)):
         e = np.zeros(3)
         e[i] = h
-        J[:, i] = (seen(X + e) - seen(X - e)) / (2 * h)
+        (ap, bp), (am, bm) = seen(X + e), seen(X - e)
+        J[0, i] = (ap - am) / (2 * h)
+        J[1, i] = (bp - bm) / (2 * h)
     return J
 
 

@@ -1,0 +1,141 @@
+"""Issue 13, the per-frame pipeline faster (seventh pass): every replaced computation against the former
+implementation (kept here as the reference) on frames of several simulated scenarios and on random inputs — the
+same values, bit for bit."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from stablemarks import landmarks as L
+from stablemarks.config import Config
+from stablemarks.geometry import StereoCamera
+from stablemarks.vision import area_stereo as A
+
+from .conftest import COV_PRIOR
+
+
+# ------------------------------------------------------------------ the SAD kernel's choice of the dense plan
+def test_regions_with_overlapping_runs_equal_the_dense_images():
+    """The kernel takes the dense plan for a row from the lanes its own plan needs (overlapping left and right runs
+    counted once): rows whose left plane window and right search windows overlap, and scattered bands, now take the
+    planned path. Whatever the plan, the requested pixels hold the dense values bit for bit."""
+    rng = np.random.default_rng(5)
+    H, W = 120, 320
+    base = cv2.GaussianBlur(rng.uniform(0, 255, (H, W + 60)), (0, 0), 1.5)
+    base = np.clip((base - base.mean()) * 4 + 128, 0, 255)
+    left = np.ascontiguousarray(base[:, 40:W + 40]).astype(np.uint8)
+    right = base[:, 52:W + 52] + rng.normal(0, 1.0, (H, W))  # a disparity of 12 px, with noise
+    right = np.clip(right, 0, 255).astype(np.uint8)
+    config = A.SADConfig(num_disparities=32)
+    dense = A.compute_disparity(left, right, config)
+    cases = [
+        # a left window with right windows inside its disparity band (the lab's plane rows)
+        (np.array([[10, 100, 150, 260]]), np.array([[8, 102, 140, 180], [8, 102, 230, 270]])),
+        # narrow bands starting and ending on different rows, and a right window across them
+        (np.array([[5, 60, 40, 52], [20, 90, 70, 82], [30, 110, 100, 112], [50, 115, 200, 215]]),
+         np.array([[15, 80, 60, 100]])),
+        # the same left window with and without the right windows, a mask
+        (rng.random((H, W)) < 0.05, rng.random((H, W)) < 0.02),
+    ]
+    n = 0
+    for lr, rr in cases:
+        res = A.compute_disparity_regions(left, right, config, lr, rr)
+        for got, want, mask in ((res.left, dense.left, A._runs_mask(*A._region_runs(lr, (H, W), "l"), (H, W))),
+                                (res.right, dense.right, A._runs_mask(*A._region_runs(rr, (H, W), "r"), (H, W)))):
+            assert np.array_equal(got[mask], want[mask], equal_nan=True)
+            assert np.isnan(got[~mask]).all()
+            n += int(np.isfinite(got[mask]).sum())
+        lmask = A._runs_mask(*A._region_runs(lr, (H, W), "l"), (H, W))
+        assert np.array_equal(res.valid[lmask], dense.valid[lmask])
+    assert n > 1000
+
+
+def test_lab_regions_equal_the_dense_images(scenario_frames, scenario_models):
+    """The front end's regions of every scenario frame (plane windows, right search windows, pair bands) with what
+    the landmark stage added: the dense values bit for bit wherever computed."""
+    config = Config()
+    n = 0
+    for frame, (_, _, front, _) in zip(scenario_frames, scenario_models, strict=True):
+        if front.lazy is None:
+            continue
+        dense = A.compute_disparity(frame[2], frame[3], config.sad)
+        for got, want, done in ((front.disparity.left, dense.left, front.lazy.done[0]),
+                                (front.disparity.right, dense.right, front.lazy.done[1])):
+            assert np.array_equal(got[done], want[done], equal_nan=True)
+            n += int(done.sum())
+        assert np.array_equal(front.disparity.valid[front.lazy.done[0]], dense.valid[front.lazy.done[0]])
+    assert n > 100_000
+
+
+# ------------------------------------------------------------------ one point projected
+def test_project_one_point_equals_the_array_path():
+    """:meth:`StereoCamera.project_columns` of one point (2,) on Python floats against the general (array) path it
+    takes for (1, 2): the same columns bit for bit, NaN behind the camera."""
+    rng = np.random.default_rng(3)
+    n_nan = 0
+    for _ in range(3000):
+        cam = StereoCamera(f=float(rng.uniform(200, 900)), cu=float(rng.uniform(100, 500)),
+                           baseline=float(rng.uniform(0.05, 0.5)), mount_x=float(rng.normal(0, 0.2)),
+                           mount_y=float(rng.normal(0, 0.2)), pan=float(rng.uniform(-1, 1)))
+        X = np.array([rng.normal(0, 3), rng.normal(0, 3), rng.uniform(-np.pi, np.pi)])
+        p = rng.normal(0, 5, 2)
+        got = cam.project_columns(X, p)
+        want = cam.project_columns(X, p[None])[0]
+        assert got.shape == (2,) and got.dtype == np.float64
+        assert np.array_equal(got, want, equal_nan=True)
+        n_nan += bool(np.isnan(got).any())
+    assert n_nan > 100
+
+
+# ------------------------------------------------------------------ the seen wall's Jacobian
+def seen_wall_jacobian_reference(camera, fit):
+    """The former :func:`~stablemarks.landmarks.seen_wall_jacobian`, on NumPy arrays."""
+    plane, X = fit.plane, np.asarray(fit.X, dtype=float)
+    P = plane.point_at(np.array([fit.s0 - 1.0, fit.s0 + 1.0]))
+    c0 = camera.camera_pose(X)
+    d = P - c0.translation
+    cs, sn = np.cos(c0.theta), np.sin(c0.theta)
+    q = np.stack([cs * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + cs * d[:, 1]], axis=-1)  # camera frame
+
+    def seen(Xp):
+        c1 = camera.camera_pose(Xp)
+        c, s_ = np.cos(c1.theta), np.sin(c1.theta)
+        Q = c1.translation + np.stack([c * q[:, 0] - s_ * q[:, 1], s_ * q[:, 0] + c * q[:, 1]], axis=-1)
+        o, t = plane.offset(Q), plane.along(Q)
+        b = (o[1] - o[0]) / (t[1] - t[0])
+        return np.array([o[0] + b * (fit.s0 - t[0]), b])
+
+    J = np.empty((2, 3))
+    for i, h in enumerate((1e-4, 1e-4, 1e-5)):
+        e = np.zeros(3)
+        e[i] = h
+        J[:, i] = (seen(X + e) - seen(X - e)) / (2 * h)
+    return J
+
+
+def test_seen_wall_jacobian_equals_the_reference(scenario_frames, scenario_models):
+    """Every fitted wall of every scenario frame, and the same walls seen from perturbed poses: the same Jacobian
+    (to 1e-9 of its size: the wall frame's two-term dot products may round differently from NumPy's), and the same
+    :func:`~stablemarks.landmarks.fit_disagreements`."""
+    config = Config()
+    rng = np.random.default_rng(11)
+    n = n_same = 0
+    for frame, (_, _, _, model) in zip(scenario_frames, scenario_models, strict=True):
+        camera = config.camera(frame[4])
+        for fit in model.fits:
+            if not fit:
+                continue
+            for X in [fit.X] + [fit.X + rng.normal(0, [0.1, 0.1, 0.05]) for _ in range(5)]:
+                f = L.replace(fit, X=X)
+                got, want = L.seen_wall_jacobian(camera, f), seen_wall_jacobian_reference(camera, f)
+                assert np.allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+                n_same += bool(np.array_equal(got, want))
+                n += 1
+                m2, slope = L.fit_disagreements(camera, f, COV_PRIOR)
+                J = want
+                S = J @ COV_PRIOR @ J.T + f.cov_R
+                r = np.array([f.a, f.b])
+                assert np.isclose(m2, float(r @ np.linalg.solve(S, r)), rtol=1e-9)
+                assert np.isclose(slope, float(f.b**2 / S[1, 1]), rtol=1e-9)
+    assert n > 30 and n_same > n // 2

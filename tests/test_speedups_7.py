@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from numba import njit
 
 from stablemarks import landmarks as L
+from stablemarks import planes as P
 from stablemarks.config import Config
 from stablemarks.geometry import StereoCamera
 from stablemarks.vision import area_stereo as A
@@ -139,3 +141,84 @@ def test_seen_wall_jacobian_equals_the_reference(scenario_frames, scenario_model
                 assert np.isclose(m2, float(r @ np.linalg.solve(S, r)), rtol=1e-9)
                 assert np.isclose(slope, float(f.b**2 / S[1, 1]), rtol=1e-9)
     assert n > 30 and n_same > n // 2
+
+
+# ------------------------------------------------------------------ the plane fit's per-pixel loops
+@njit(cache=False)
+def on_line_reference(disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu, a, b, s0, limit):
+    """The former :func:`~stablemarks.planes._on_line`: the test only where the band holds."""
+    h, K = disp.shape
+    keep = np.zeros((h, K), dtype=np.bool_)
+    for i in range(h):
+        for k in range(K):
+            if band[i, k]:
+                Z = fb / float(disp[i, k])
+                s = c_s + Z * r_s[k]
+                o = c_o + Z * r_o[k]
+                keep[i, k] = abs((o - a - b * (s - s0)) / (abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6)) <= limit
+    return keep
+
+
+def fit_plane_reference(camera, X, disparity, prediction, config):
+    """The former :func:`~stablemarks.planes.fit_plane`: the same function with its final classification as the
+    branching loop it was (:func:`on_line_reference`) and the band from :meth:`PlanePrediction.band_box` (on a view of
+    the box, not a contiguous copy)."""
+    fast_on_line, fast_band = P._on_line, P._band
+
+    def band_of_view(disp, v0, *args):  # PlanePrediction.band_box: the band of a view of the box
+        assert disp.flags.c_contiguous and not np.shares_memory(disp, disparity)
+        rows, cols = prediction.box(disparity.shape[0], config.row_margin_px)
+        assert rows.start == v0
+        return fast_band(disparity[rows, cols], v0, *args)
+
+    P._on_line, P._band = on_line_reference, band_of_view
+    try:
+        return P.fit_plane(camera, X, disparity, prediction, config)
+    finally:
+        P._on_line, P._band = fast_on_line, fast_band
+
+
+def test_fit_plane_equals_the_reference(scenario_frames, scenario_models):
+    """Every predicted plane of every frame, on its disparity image, cluttered and thinned: the same fit bit for bit
+    (the region of inliers, the line, its covariance) or the same failure."""
+    rng = np.random.default_rng(17)
+    config = Config()
+    n_fits = 0
+    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
+        camera = config.camera(frame[4])
+        for pred in model.predictions:
+            disp = np.array(front.disparity.left)
+            cluttered = disp.copy()
+            cluttered[rng.random(disp.shape) < 0.2] += np.float32(1.5)
+            sparse = disp.copy()
+            sparse[rng.random(disp.shape) < 0.97] = np.nan
+            for d in (disp, cluttered, sparse):
+                new = P.fit_plane(camera, model.X, d, pred, config.planes)
+                ref = fit_plane_reference(camera, model.X, d, pred, config.planes)
+                assert type(new) is type(ref)
+                if not new:
+                    assert (new.reason, new.n_pixels) == (ref.reason, ref.n_pixels)
+                    continue
+                for name in ("a", "b", "s0", "n_points", "n_inliers", "chi2_dof"):
+                    assert getattr(new, name) == getattr(ref, name), name
+                assert np.array_equal(new.cov_R, ref.cov_R) and np.array_equal(new.region, ref.region)
+                n_fits += 1
+    assert n_fits > 20
+
+
+def test_on_line_equals_the_reference_on_random_boxes():
+    """:func:`~stablemarks.planes._on_line` against the branching loop on random boxes with NaN, zero and negative
+    disparities outside the band (which holds positive ones only, as :func:`~stablemarks.planes._band` makes it), on
+    contiguous boxes and on views."""
+    rng = np.random.default_rng(19)
+    for _ in range(200):
+        h, K = (int(v) for v in rng.integers(1, 40, 2))
+        disp = rng.uniform(-2, 40, (h + 3, K + 5)).astype(np.float32)
+        disp[rng.random(disp.shape) < 0.2] = np.nan
+        disp[rng.random(disp.shape) < 0.05] = 0.0
+        view = disp[1 : h + 1, 2 : K + 2]
+        band = (rng.random((h, K)) < 0.7) & (view > 0)  # as _band: finite positive disparities only
+        args = (rng.normal(0, 1, K), rng.normal(0, 1, K), float(rng.normal()), float(rng.normal()), 60.0, 0.2,
+                float(rng.normal(0, 0.05)), float(rng.normal(0, 0.05)), float(rng.normal()), float(rng.uniform(0.5, 5)))
+        for d in (view, np.ascontiguousarray(view)):
+            assert np.array_equal(P._on_line(d, band, *args), on_line_reference(d, band, *args))

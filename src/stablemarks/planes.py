@@ -355,7 +355,11 @@ def fit_plane(
     dropped and the fit repeated (clutter in front of the wall does not bend it).
     """
     plane = prediction.plane
-    rows, cols, band = prediction.band_box(disparity, config.row_margin_px)
+    # the band's box as one contiguous array (the per-pixel loops vectorize on it): band_box's band of it
+    rows, cols = prediction.box(disparity.shape[0], config.row_margin_px)
+    disp = np.ascontiguousarray(disparity[rows, cols])
+    band = _band(disp, rows.start, prediction.d, prediction.sigma_d, prediction.v_top, prediction.v_bottom,
+                 float(prediction.gate), float(config.row_margin_px))
     n = int(np.count_nonzero(band))
     if n < config.min_pixels:
         return FailedFit(plane, f"{n} disparity pixels in the predicted band (need {config.min_pixels})", n)
@@ -373,7 +377,6 @@ def fit_plane(
     fb = camera.f * camera.baseline
     # Fit on every other row and column (neighbouring pixels share their SAD window anyway), then
     # classify every band pixel with the final line.
-    disp = disparity[rows, cols]
     frame = (r_s, r_o, c_s, c_o, fb, config.sigma_nu(camera))
     if np.count_nonzero(band[rows.start % 2 :: 2, cols.start % 2 :: 2]) < config.min_pixels // 4:
         s, o, sigma_o = _wall_points(disp, band, 0, 0, 1, *frame)
@@ -521,18 +524,19 @@ def _wall_points(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu):  #
     return s, o, sigma
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _on_line(disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu, a, b, s0, limit):  # pragma: no cover - numba
-    """Band pixels (h, K) within ``limit`` σ of the line ``o = a + b (s − s0)``."""
+    """Band pixels (h, K) within ``limit`` σ of the line ``o = a + b (s − s0)``. Branch-free (every pixel's test
+    computed, kept where in the band): the loop vectorizes, the same arithmetic per band pixel."""
     h, K = disp.shape
-    keep = np.zeros((h, K), dtype=np.bool_)
+    keep = np.empty((h, K), dtype=np.bool_)
     for i in range(h):
         for k in range(K):
-            if band[i, k]:
-                Z = fb / float(disp[i, k])
-                s = c_s + Z * r_s[k]
-                o = c_o + Z * r_o[k]
-                keep[i, k] = abs((o - a - b * (s - s0)) / (abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6)) <= limit
+            Z = fb / float(disp[i, k])
+            s = c_s + Z * r_s[k]
+            o = c_o + Z * r_o[k]
+            keep[i, k] = band[i, k] & (abs((o - a - b * (s - s0)) / (abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6))
+                                       <= limit)
     return keep
 
 

@@ -9,6 +9,7 @@ import numpy as np
 from numba import njit
 
 from stablemarks import landmarks as L
+from stablemarks import pipeline
 from stablemarks import planes as P
 from stablemarks.config import Config
 from stablemarks.geometry import StereoCamera
@@ -222,3 +223,38 @@ def test_on_line_equals_the_reference_on_random_boxes():
                 float(rng.normal(0, 0.05)), float(rng.normal(0, 0.05)), float(rng.normal()), float(rng.uniform(0.5, 5)))
         for d in (view, np.ascontiguousarray(view)):
             assert np.array_equal(P._on_line(d, band, *args), on_line_reference(d, band, *args))
+
+
+# ------------------------------------------------------------------ the pair bands the disparity filter reads
+def pair_bands_reference(pairs, left_segments, search_radius):
+    """The former :func:`~stablemarks.pipeline.pair_bands`: the pairs' segments copied out
+    (:meth:`Segments.subset`), their boxes by ``reduceat``."""
+    if not len(pairs):
+        return np.zeros((0, 4), np.int64)
+    own = left_segments.subset(np.unique(pairs.left_index))
+    counts = np.diff(own.pixel_offsets)
+    own_pix = own.pixel_uv.astype(np.int64)
+    starts = own.pixel_offsets[:-1][counts > 0]
+    if not len(starts):
+        return np.zeros((0, 4), np.int64)
+    u, v = own_pix[:, 0], own_pix[:, 1]
+    return np.stack([np.minimum.reduceat(v, starts), np.maximum.reduceat(v, starts) + 1,
+                     np.minimum.reduceat(u, starts) - search_radius,
+                     np.maximum.reduceat(u, starts) + search_radius + 1], axis=1)
+
+
+def test_pair_bands_equal_the_reference(scenario_models):
+    """Every scenario frame's pairs, all of them, the kept ones, random subsets with repeated segments and none: the
+    same rectangles in the same order, int64."""
+    rng = np.random.default_rng(23)
+    n = 0
+    for _, _, front, _ in scenario_models:
+        seg = front.left_segments
+        for pairs in (front.pairs, front.kept_pairs, front.pairs.subset(rng.random(len(front.pairs)) < 0.3),
+                      front.pairs.subset(np.zeros(len(front.pairs), bool))):
+            for radius in (0, 7):
+                got = pipeline.pair_bands(pairs, seg, radius)
+                want = pair_bands_reference(pairs, seg, radius)
+                assert got.dtype == want.dtype == np.int64 and np.array_equal(got, want)
+                n += len(got)
+    assert n > 100

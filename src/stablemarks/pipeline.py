@@ -28,6 +28,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from .config import Config
 from .errors import ImageError, expected
@@ -172,16 +173,33 @@ def pair_bands(pairs: SegmentPairs, left_segments: Segments, search_radius: int)
     ``search_radius``."""
     if not len(pairs):
         return np.zeros((0, 4), np.int64)
-    own = left_segments.subset(np.unique(pairs.left_index))
-    counts = np.diff(own.pixel_offsets)
-    own_pix = own.pixel_uv.astype(np.int64)
-    starts = own.pixel_offsets[:-1][counts > 0]
-    if not len(starts):
-        return np.zeros((0, 4), np.int64)
-    u, v = own_pix[:, 0], own_pix[:, 1]
-    return np.stack([np.minimum.reduceat(v, starts), np.maximum.reduceat(v, starts) + 1,
-                     np.minimum.reduceat(u, starts) - search_radius,
-                     np.maximum.reduceat(u, starts) + search_radius + 1], axis=1)
+    # one pass over the pixels of each segment in use (in the order of np.unique's sorted indices, those without a
+    # pixel left out), without a Segments.subset copy of them
+    return _segment_boxes(np.unique(np.asarray(pairs.left_index, np.int64)),
+                          np.asarray(left_segments.pixel_offsets, np.int64), left_segments.pixel_uv, int(search_radius))
+
+
+@njit(cache=True)
+def _segment_boxes(seg, offsets, pixel_uv, radius):  # pragma: no cover - numba
+    """:func:`pair_bands` of the segments ``seg`` (sorted, unique): per segment with pixels, its rows' extent and its
+    columns' widened by ``radius``, int64."""
+    out = np.empty((len(seg), 4), np.int64)
+    n = 0
+    for i in range(len(seg)):
+        a, b = offsets[seg[i]], offsets[seg[i] + 1]
+        if b <= a:
+            continue
+        u0 = u1 = np.int64(pixel_uv[a, 0])
+        v0 = v1 = np.int64(pixel_uv[a, 1])
+        for q in range(a + 1, b):
+            u, v = np.int64(pixel_uv[q, 0]), np.int64(pixel_uv[q, 1])
+            u0, u1, v0, v1 = min(u0, u), max(u1, u), min(v0, v), max(v1, v)
+        out[n, 0] = v0
+        out[n, 1] = v1 + 1
+        out[n, 2] = u0 - radius
+        out[n, 3] = u1 + radius + 1
+        n += 1
+    return out[:n].copy()
 
 
 def _rect_mask(rects: np.ndarray, shape: tuple[int, int], mask: np.ndarray | None = None) -> np.ndarray:

@@ -4,8 +4,11 @@ same values, bit for bit."""
 
 from __future__ import annotations
 
+from dataclasses import FrozenInstanceError
+
 import cv2
 import numpy as np
+import pytest
 from numba import njit
 
 from stablemarks import landmarks as L
@@ -258,3 +261,81 @@ def test_pair_bands_equal_the_reference(scenario_models):
                 assert got.dtype == want.dtype == np.int64 and np.array_equal(got, want)
                 n += len(got)
     assert n > 100
+
+
+# ------------------------------------------------------------------ a point inside the wall, projected
+def inner_columns_reference(camera, X, plane, edge, depth=0.3):
+    """The former :func:`~stablemarks.landmarks._inner_columns`: :meth:`ReferencePlane.point_at` of a (1,) array."""
+    inner = plane.point_at(np.array([min(depth, 0.5 * plane.length)]), edge)[0]
+    return camera.project_columns(X, inner)
+
+
+def test_inner_columns_equal_the_reference(scenario_frames):
+    """Both ends of every wall of every scenario map, from every frame's pose and perturbed ones, at several depths
+    (short walls: half the wall): the same columns bit for bit."""
+    config = Config()
+    rng = np.random.default_rng(29)
+    n = 0
+    for frame in scenario_frames:
+        camera = config.camera(frame[4])
+        for X in [frame[6]] + [frame[6] + rng.normal(0, [0.5, 0.5, 0.3]) for _ in range(3)]:
+            for plane in frame[5]:
+                for edge in ("p1", "p2"):
+                    for depth in (0.1, 0.3, 5.0):
+                        got = L._inner_columns(camera, X, plane, edge, depth)
+                        assert np.array_equal(got, inner_columns_reference(camera, X, plane, edge, depth),
+                                              equal_nan=True)
+                        n += 1
+    assert n > 500
+
+
+# ------------------------------------------------------------------ candidates made without the dataclass __init__
+def model_features_reference(*args, **kwargs):
+    """The former :func:`~stablemarks.landmarks.model_features`: its candidates made by ``Candidate(**fields)``."""
+    fast = L._new_candidate
+    L._new_candidate = lambda values: L.Candidate(**values)
+    try:
+        return L.model_features(*args, **kwargs)
+    finally:
+        L._new_candidate = fast
+
+
+def _same_candidate(a, b) -> None:
+    assert type(a) is type(b) is L.Candidate
+    assert list(a.__dict__) == list(b.__dict__)
+    for name, x in a.__dict__.items():
+        y = b.__dict__[name]
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            assert np.array_equal(x, y, equal_nan=True), name
+        else:
+            assert type(x) is type(y) and (x == y or (x != x and y != y)), name
+
+
+def test_model_features_equal_the_reference(scenario_frames, scenario_models):
+    """The candidates of every plane of every scenario frame from each of its boundaries: the same fields, values and
+    order, as made by the dataclass; and the selection and the frozen dataclass's behaviour on them."""
+    config = Config()
+    n = 0
+    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
+        camera = config.camera(frame[4])
+        pairs = front.kept_pairs
+        step = front.left_segments.contrast[pairs.left_index] / 4.0
+        for plane in model.planes:
+            for b in plane.boundaries:
+                idx = np.flatnonzero(plane.members)
+                got = L.model_features(camera, plane.fit, b, pairs, idx, step, config.landmarks)
+                want = model_features_reference(camera, plane.fit, b, pairs, idx, step, config.landmarks)
+                assert len(got) == len(want)
+                for a, c in zip(got, want, strict=True):
+                    _same_candidate(a, c)
+                    assert repr(a) == repr(c)
+                for a, c in zip(L.select(got, plane.boundaries, config.landmarks),
+                                L.select(want, plane.boundaries, config.landmarks), strict=True):
+                    _same_candidate(a, c)
+                n += len(got)
+    assert n > 20
+    c = got[0]
+    with pytest.raises(FrozenInstanceError):
+        c.s = 1.0
+    with pytest.raises(TypeError):
+        L._new_candidate({"s": 1.0})

@@ -632,18 +632,29 @@ def model_features(
     k_l = k.tolist()
     out = []
     for rank, j in enumerate(np.argsort(d_p, kind="stable").tolist()):
-        out.append(
-            Candidate(plane.id, plane.label, rank + 1, k_l[j], edge, d_l[j], boundary.sigma_along, sf_l[j],
-                      P_edge + d_p[j] * t,  # Eq 15
-                      var_s[j] * tt,  # Eq 17: rank 1 along the wall
-                      zl_l[j], zh_l[j], ls_l[j], ul_l[j], ur_l[j], vt_l[j], vb_l[j],
-                      P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured,
-                      contrast=c_l[j], wall_offset=G_l[j], sigma_wall_offset=sG_l[j], height_margin=m_l[j],
-                      range=dist_l[j], incidence=inc_l[j],
-                      shared_jacobian=None if J_shared is None else J_shared[j], shared_cov=cov_shared,
-                      sigma_own=so_l[j])
-        )
+        out.append(_new_candidate(dict(
+            plane_id=plane.id, plane_label=plane.label, index=rank + 1, pair=k_l[j], edge=edge, s=d_l[j],
+            sigma_b=boundary.sigma_along, sigma_f=sf_l[j],
+            P=P_edge + d_p[j] * t,  # Eq 15
+            cov=var_s[j] * tt,  # Eq 17: rank 1 along the wall
+            z_low=zl_l[j], z_high=zh_l[j], length_similarity=ls_l[j], u_left=ul_l[j], u_right=ur_l[j],
+            v_top=vt_l[j], v_bottom=vb_l[j], selected=False, reason="",
+            P_observed=P_hat[j], cov_observed=cov_hat[j], contrast=c_l[j],
+            sigma_b_measured=boundary.sigma_along_measured, wall_offset=G_l[j], sigma_wall_offset=sG_l[j],
+            height_margin=m_l[j], range=dist_l[j], incidence=inc_l[j],
+            shared_jacobian=None if J_shared is None else J_shared[j], shared_cov=cov_shared, sigma_own=so_l[j])))
     return out
+
+
+def _new_candidate(values: dict) -> Candidate:
+    """``Candidate(**values)`` with every field given, without the frozen dataclass's ``__init__`` (~35 fields set
+    one by one through ``object.__setattr__``: ~8 µs a candidate): the same object (Candidate has no
+    ``__post_init__``), its fields in the same order. (See :func:`_replace`.)"""
+    if values.keys() != _CANDIDATE_FIELDS:
+        raise TypeError(f"Candidate fields: expected {sorted(_CANDIDATE_FIELDS)}, got {sorted(values)}")
+    new = object.__new__(Candidate)
+    new.__dict__.update(values)
+    return new
 
 
 def relative_error_model(camera: StereoCamera, fit: PlaneFit, boundary: Boundary, u_left, u_right, t,
@@ -1269,8 +1280,13 @@ def wall_columns(camera: StereoCamera, fit: PlaneFit, search_sigma: float) -> tu
 def _inner_columns(camera: StereoCamera, X, plane, edge: str, depth: float = 0.3) -> np.ndarray:
     """(2,) image columns of a point ``depth`` metres (at most half the wall) inside the wall from ``edge``:
     which way the wall lies from its end in each image."""
-    inner = plane.point_at(np.array([min(depth, 0.5 * plane.length)]), edge)[0]
-    return camera.project_columns(X, inner)
+    # plane.point_at of one distance on Python floats (the same products and sums), projected as one point
+    s = float(min(depth, 0.5 * plane.length))
+    if edge == "p1":
+        (x0, y0), (tx, ty) = plane.P1.tolist(), plane.direction.tolist()
+    else:
+        (x0, y0), (tx, ty) = plane.P2.tolist(), (-plane.direction).tolist()
+    return camera.project_columns(X, np.array([x0 + s * tx, y0 + s * ty]))
 
 
 def _other_walls(world_map: Map, plane) -> tuple[np.ndarray, list[int]]:

@@ -339,3 +339,69 @@ def test_model_features_equal_the_reference(scenario_frames, scenario_models):
         c.s = 1.0
     with pytest.raises(TypeError):
         L._new_candidate({"s": 1.0})
+
+
+# ------------------------------------------------------------------ the prepared pair, written once
+@njit(cache=False)
+def prepare_reference(image8, sobel, cap, pad_l, pad_r, texture):
+    """The former :func:`~stablemarks.vision.area_stereo._prepare`: zeroed arrays, then the image written into them."""
+    n_rows, n_cols = image8.shape
+    width = pad_l + n_cols + pad_r
+    out = np.zeros((n_rows, width), np.int16)
+    asat = np.zeros((n_rows, n_cols) if texture else (1, 1), np.uint8)
+    lo, hi = np.int16(-cap), np.int16(cap)
+    for y in range(n_rows):
+        for x in range(n_cols):
+            if cap > 0:
+                out[y, pad_l + x] = min(max(sobel[y, x], lo), hi) + hi
+            else:
+                out[y, pad_l + x] = image8[y, x]
+            if texture:
+                asat[y, x] = min(abs(np.int32(sobel[y, x])), 255)
+    return out, asat
+
+
+def test_prepare_equals_the_reference():
+    """Random images (and their x-Sobel), every padding, prefilter on and off, with and without the texture image:
+    the same arrays, padding zero."""
+    rng = np.random.default_rng(31)
+    for _ in range(60):
+        H, W = (int(v) for v in rng.integers(1, 50, 2))
+        img = rng.integers(0, 256, (H, W)).astype(np.uint8)
+        sob = A._xsobel(img) if min(H, W) > 1 else rng.integers(-1020, 1021, (H, W)).astype(np.int16)
+        for cap in (0, 1, 5, 63):
+            for pad_l, pad_r in ((0, 0), (63, 0), (0, 7), (31, 5)):
+                for texture in (False, True):
+                    got = A._prepare(img, sob, cap, pad_l, pad_r, texture)
+                    want = prepare_reference(img, sob, cap, pad_l, pad_r, texture)
+                    for x, y in zip(got, want, strict=True):
+                        assert x.dtype == y.dtype and np.array_equal(x, y)
+
+
+# ------------------------------------------------------------------ the columns holding a computed disparity
+def found_reference(lazy, image):
+    """The former :meth:`~stablemarks.pipeline.RegionDisparity.found`: over the whole image."""
+    cols = np.flatnonzero((lazy._valid if image == 0 else np.isfinite(lazy._images[1])).any(axis=0))
+    return (float(cols[0]), float(cols[-1])) if len(cols) else (np.inf, -np.inf)
+
+
+def test_found_equals_the_reference(scenario_frames):
+    """Region disparities of every scenario frame, from rectangles, from masks and from nothing, then grown by
+    compute() with masks and by valid_columns(): found() of both images equals the whole image's scan each time."""
+    config = Config()
+    rng = np.random.default_rng(37)
+    n = 0
+    for frame in scenario_frames[::2]:
+        left8, right8 = frame[2], frame[3]
+        H, W = left8.shape
+        rects = np.array([[100, 300, 200, 400], [50, 60, -10, 700], [400, 380, 10, 20]])
+        for lr, rr in ((rects, rects[:1]), (rng.random((H, W)) < 0.01, None), (None, None)):
+            lazy = pipeline.RegionDisparity(left8, right8, config.sad, lr, rr)
+            steps = [lambda lz: None, lambda lz: lz.compute(rng.random((H, W)) < 0.002, rng.random((H, W)) < 0.002),
+                     lambda lz: lz.valid_columns()]
+            for step in steps:
+                step(lazy)
+                for image in (0, 1):
+                    assert lazy.found(image) == found_reference(lazy, image)
+                    n += np.isfinite(lazy.found(image)[0])
+    assert n > 10

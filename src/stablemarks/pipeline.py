@@ -211,6 +211,33 @@ def _rect_mask(rects: np.ndarray, shape: tuple[int, int], mask: np.ndarray | Non
     return mask
 
 
+def _rects_box(rects, shape: tuple[int, int]) -> tuple[int, int, int, int] | None:
+    """Bounding box ``(row0, row1, col0, col1)`` (half-open) of :func:`_rect_mask` of ``rects``; None when empty."""
+    H, W = shape
+    box = None
+    for v0, v1, u0, u1 in np.asarray(rects, np.int64).reshape(-1, 4).tolist():
+        v0, v1, u0, u1 = max(0, v0), max(0, min(H, v1)), max(0, u0), max(0, min(W, u1))
+        if v1 > v0 and u1 > u0:
+            box = _union_box(box, (v0, v1, u0, u1))
+    return box
+
+
+def _mask_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    """Bounding box ``(row0, row1, col0, col1)`` (half-open) of the True pixels of an (H, W) bool mask; None: none."""
+    rows = np.flatnonzero(np.asarray(mask).any(axis=1))
+    if not len(rows):
+        return None
+    cols = np.flatnonzero(mask[rows[0] : rows[-1] + 1].any(axis=0))
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+def _union_box(a, b):
+    """The bounding box of two boxes (None: empty)."""
+    if a is None or b is None:
+        return b if a is None else a
+    return min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3])
+
+
 DENSE_ABOVE = 0.8
 """Above this :func:`region_work` the front end computes the dense disparity images instead: the kernel's cost
 is about proportional to the work, the region bookkeeping (and any pixel computed later) comes on top."""
@@ -279,6 +306,10 @@ class RegionDisparity:
         self.result = DisparityResult(*views)
         self.done = tuple(np.zeros((H, W), bool) if m is None else
                           np.array(m) if np.asarray(m).dtype == bool else _rect_mask(m, (H, W)) for m in (left, right))
+        # per image, the bounding box (row0, row1, col0, col1) of the pixels computed (None: none): no pixel outside
+        # it is ever valid, so found() reads only it
+        self._box = [None if m is None else _mask_box(m) if np.asarray(m).dtype == bool else _rects_box(m, (H, W))
+                     for m in (left, right)]
         self.limits = disparity_limits(sad, W)
         # per image: the first and the last column not proven to hold no valid pixel (_advance), and the first
         # and last column holding a computed valid pixel (None: to be found again)
@@ -301,6 +332,7 @@ class RegionDisparity:
         self.calls += 1
         for image in (0, 1):
             self.done[image][need[image]] = True
+            self._box[image] = _union_box(self._box[image], _mask_box(need[image]))
         self._found = [None, None]
         return True
 
@@ -316,8 +348,14 @@ class RegionDisparity:
     def found(self, image: int) -> tuple[float, float]:
         """First and last column of ``image`` holding a computed valid pixel (±inf: none)."""
         if self._found[image] is None:
-            cols = np.flatnonzero((self._valid if image == 0 else np.isfinite(self._images[1])).any(axis=0))
-            self._found[image] = (float(cols[0]), float(cols[-1])) if len(cols) else (np.inf, -np.inf)
+            box = self._box[image]
+            if box is None:
+                self._found[image] = (np.inf, -np.inf)
+            else:  # inside the box of the computed pixels: outside it every pixel is NaN / not valid
+                r0, r1, c0, c1 = box
+                sub = self._valid[r0:r1, c0:c1] if image == 0 else np.isfinite(self._images[1][r0:r1, c0:c1])
+                cols = np.flatnonzero(sub.any(axis=0))
+                self._found[image] = (float(cols[0] + c0), float(cols[-1] + c0)) if len(cols) else (np.inf, -np.inf)
         return self._found[image]
 
     # ------------------------------------------------------------- the columns valid_columns returns

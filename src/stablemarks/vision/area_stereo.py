@@ -1089,8 +1089,8 @@ def _prepare(image8, sobel, cap, pad_l, pad_r, texture):  # pragma: no cover - n
     255 that the texture test sums (else (1, 1))."""
     n_rows, n_cols = image8.shape
     width = pad_l + n_cols + pad_r
-    out = np.zeros((n_rows, width), np.int16)
-    asat = np.zeros((n_rows, n_cols) if texture else (1, 1), np.uint8)
+    out = np.empty((n_rows, width), np.int16)  # every element written below (the padding zeroed): no second pass
+    asat = np.empty((n_rows, n_cols), np.uint8) if texture else np.zeros((1, 1), np.uint8)
     flat_out = out.reshape(out.size)
     flat_img = image8.reshape(image8.size)
     flat_sob = sobel.reshape(sobel.size)
@@ -1100,6 +1100,10 @@ def _prepare(image8, sobel, cap, pad_l, pad_r, texture):  # pragma: no cover - n
     for y in range(_u64(n_rows)):
         src = y * w
         dst = y * _u64(width) + _u64(pad_l)
+        for x in range(_u64(pad_l)):
+            flat_out[dst - _u64(pad_l) + x] = 0
+        for x in range(_u64(pad_r)):
+            flat_out[dst + w + x] = 0
         if cap > 0:
             for x in range(w):
                 flat_out[dst + x] = min(max(flat_sob[src + x], lo), hi) + hi

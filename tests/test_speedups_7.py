@@ -397,7 +397,7 @@ def test_found_equals_the_reference(scenario_frames):
         rects = np.array([[100, 300, 200, 400], [50, 60, -10, 700], [400, 380, 10, 20]])
         for lr, rr in ((rects, rects[:1]), (rng.random((H, W)) < 0.01, None), (None, None)):
             lazy = pipeline.RegionDisparity(left8, right8, config.sad, lr, rr)
-            steps = [lambda lz: None, lambda lz: lz.compute(rng.random((H, W)) < 0.002, rng.random((H, W)) < 0.002),
+            steps = [lambda lz: None, lambda lz, s=(H, W): lz.compute(rng.random(s) < 0.002, rng.random(s) < 0.002),
                      lambda lz: lz.valid_columns()]
             for step in steps:
                 step(lazy)

@@ -405,3 +405,41 @@ def test_found_equals_the_reference(scenario_frames):
                     assert lazy.found(image) == found_reference(lazy, image)
                     n += np.isfinite(lazy.found(image)[0])
     assert n > 10
+
+
+# ------------------------------------------------------------------ the front end's runs made once
+def front_disparity_reference(left, right, config, regions, pairs, left_segments, sobel=None):
+    """The former :func:`~stablemarks.pipeline.front_disparity`: the decision by :func:`region_work` of the
+    rectangles, then the region disparity from the rectangles (their runs and planning runs made again)."""
+    if regions is None or config.sad.backend != "numba":
+        return A.compute_disparity(left, right, config.sad, sobel=sobel), None
+    want_l = np.concatenate([np.asarray(regions.left, np.int64).reshape(-1, 4),
+                             pipeline.pair_bands(pairs, left_segments, config.filter.search_radius)])
+    want_r = np.asarray(regions.right, np.int64).reshape(-1, 4)
+    if pipeline.region_work(want_l, want_r, config.sad, np.shape(left)) >= pipeline.DENSE_ABOVE:
+        return A.compute_disparity(left, right, config.sad, sobel=sobel), None
+    lazy = pipeline.RegionDisparity(left, right, config.sad, want_l, want_r, sobel=sobel)
+    return lazy.result, lazy
+
+
+def test_front_disparity_equals_the_reference(scenario_frames, scenario_models):
+    """Every scenario frame with its regions, with none and with the whole image asked for: the same decision
+    (regions or dense), the same images bit for bit, the same pixels computed."""
+    config = Config()
+    n_lazy = 0
+    for frame, (_, _, front, _) in zip(scenario_frames, scenario_models, strict=True):
+        left, right = frame[2], frame[3]
+        H, W = left.shape
+        everything = pipeline.Regions(np.array([[0, H, 0, W]]), np.array([[0, H, 0, W]]))
+        for regions in (front.regions, pipeline.Regions.none(), everything):
+            got, lazy = pipeline.front_disparity(left, right, config, regions, front.pairs, front.left_segments)
+            want, ref = front_disparity_reference(left, right, config, regions, front.pairs, front.left_segments)
+            assert (lazy is None) == (ref is None)
+            for x, y in ((got.left, want.left), (got.right, want.right), (got.valid, want.valid)):
+                assert np.array_equal(x, y, equal_nan=True)
+            if lazy is not None:
+                assert all(np.array_equal(a, b) for a, b in zip(lazy.done, ref.done, strict=True))
+                assert lazy._box == ref._box
+                assert lazy.found(0) == ref.found(0) and lazy.found(1) == ref.found(1)
+                n_lazy += 1
+    assert n_lazy >= 8

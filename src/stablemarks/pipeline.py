@@ -42,6 +42,7 @@ from .vision.area_stereo import (
     SADConfig,
     _planning_runs,
     _region_runs,
+    _run_prepared,
     _xsobel,
     compute_disparity,
     prepare_pair,
@@ -222,6 +223,21 @@ def _rects_box(rects, shape: tuple[int, int]) -> tuple[int, int, int, int] | Non
     return box
 
 
+@njit(cache=True)
+def _runs_mask(ptr, runs, H, W):  # pragma: no cover - numba
+    """(H, W) bool mask of the runs ``(ptr, runs)`` of :func:`~stablemarks.vision.area_stereo._region_runs` and its
+    bounding box ``(row0, row1, col0, col1)`` (half-open; row1 <= row0 when empty)."""
+    mask = np.zeros((H, W), np.bool_)
+    r0, r1, c0, c1 = H, 0, W, 0
+    for y in range(H):
+        for t in range(ptr[y], ptr[y + 1]):
+            a, b = runs[t, 0], runs[t, 1]
+            if b > a:
+                mask[y, a:b] = True
+                r0, r1, c0, c1 = min(r0, y), max(r1, y + 1), min(c0, a), max(c1, b)
+    return mask, (r0, r1, c0, c1)
+
+
 def _mask_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
     """Bounding box ``(row0, row1, col0, col1)`` (half-open) of the True pixels of an (H, W) bool mask; None: none."""
     rows = np.flatnonzero(np.asarray(mask).any(axis=1))
@@ -251,13 +267,21 @@ def region_work(left: np.ndarray, right: np.ndarray, sad: SADConfig, shape: tupl
     left-right check reads; a row never needs more than the dense row (the kernel takes the dense plan from
     three quarters on)."""
     H, W = shape
+    plans = [_planning_runs(*_region_runs(mask, (H, W), "regions"), sad.num_disparities, _STEP, W)
+             for mask in (left, right)]
+    return _plans_work(plans, sad, shape)
+
+
+def _plans_work(plans, sad: SADConfig, shape: tuple[int, int]) -> float:
+    """:func:`region_work` of the planning runs ``plans`` ((ptr, runs) of the left and of the right pixels,
+    :func:`~stablemarks.vision.area_stereo._planning_runs`)."""
+    H, W = shape
     r = sad.block_size // 2
     dense_row = W - 2 * r
     if H <= 2 * r or dense_row <= 0:
         return 0.0
     total = np.zeros(H)
-    for mask in (left, right):
-        ptr, runs = _planning_runs(*_region_runs(mask, (H, W), "regions"), sad.num_disparities, _STEP, W)
+    for ptr, runs in plans:
         if len(runs):
             width = (runs[:, 1] - runs[:, 0] + sad.num_disparities - 1).astype(float)
             total += np.add.reduceat(np.append(width, 0.0), ptr[:-1]) * (np.diff(ptr) > 0)
@@ -283,7 +307,7 @@ class RegionDisparity:
     """
 
     def __init__(self, left8: np.ndarray, right8: np.ndarray, sad: SADConfig, left=None, right=None, *,
-                 sobel: tuple[np.ndarray, np.ndarray] | None = None):
+                 sobel: tuple[np.ndarray, np.ndarray] | None = None, _runs=None):
         """``left8``, ``right8``: the (H, W) uint8 pair; ``left``, ``right``: the pixels to compute first, (N, 4)
         rectangles ``(row0, row1, col0, col1)`` or (H, W) bool masks (None: none); ``sobel``: the pair's x-Sobel
         derivatives if already computed (``cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3)``). The pair is prefiltered
@@ -293,7 +317,10 @@ class RegionDisparity:
         self.sad = sad
         self._prep = prepare_pair(left8, right8, sad, *(sobel or (None, None)))
         empty = np.zeros((0, 4), np.int64)
-        res = regions_on_prepared(self._prep, empty if left is None else left, empty if right is None else right)
+        if _runs is not None and sad.backend == "numba":  # front_disparity's runs and planning runs of left, right
+            res = _run_prepared(self._prep, _runs[0], _runs[1], plans=_runs[2:])
+        else:
+            res = regions_on_prepared(self._prep, empty if left is None else left, empty if right is None else right)
         self.calls = 1
         self._images = (res.left, res.right)
         self._valid = res.valid
@@ -304,12 +331,17 @@ class RegionDisparity:
             v.setflags(write=False)
             views.append(v)
         self.result = DisparityResult(*views)
-        self.done = tuple(np.zeros((H, W), bool) if m is None else
-                          np.array(m) if np.asarray(m).dtype == bool else _rect_mask(m, (H, W)) for m in (left, right))
-        # per image, the bounding box (row0, row1, col0, col1) of the pixels computed (None: none): no pixel outside
+        # per image, the pixels computed and their bounding box (row0, row1, col0, col1) (None: none): no pixel outside
         # it is ever valid, so found() reads only it
-        self._box = [None if m is None else _mask_box(m) if np.asarray(m).dtype == bool else _rects_box(m, (H, W))
-                     for m in (left, right)]
+        if _runs is not None:  # the runs of the pixels asked for: the same pixels as the rectangles'
+            made = [_runs_mask(ptr, runs, H, W) for ptr, runs in _runs[:2]]
+            self.done = tuple(mask for mask, _ in made)
+            self._box = [box if box[1] > box[0] else None for _, box in made]
+        else:
+            self.done = tuple(np.zeros((H, W), bool) if m is None else np.array(m) if np.asarray(m).dtype == bool
+                              else _rect_mask(m, (H, W)) for m in (left, right))
+            self._box = [None if m is None else _mask_box(m) if np.asarray(m).dtype == bool else
+                         _rects_box(m, (H, W)) for m in (left, right)]
         self.limits = disparity_limits(sad, W)
         # per image: the first and the last column not proven to hold no valid pixel (_advance), and the first
         # and last column holding a computed valid pixel (None: to be found again)
@@ -581,9 +613,13 @@ def front_disparity(left: np.ndarray, right: np.ndarray, config: Config, regions
     want_l = np.concatenate([np.asarray(regions.left, np.int64).reshape(-1, 4),
                              pair_bands(pairs, left_segments, config.filter.search_radius)])
     want_r = np.asarray(regions.right, np.int64).reshape(-1, 4)
-    if region_work(want_l, want_r, config.sad, np.shape(left)) >= DENSE_ABOVE:
+    # the runs of requested pixels and the kernel's planning runs, made once for the decision and the kernel
+    shape = np.shape(left)
+    runs = [_region_runs(want_l, shape, "regions"), _region_runs(want_r, shape, "right_regions")]
+    plans = [_planning_runs(*rr, config.sad.num_disparities, _STEP, shape[1]) for rr in runs]
+    if _plans_work(plans, config.sad, shape) >= DENSE_ABOVE:
         return compute_disparity(left, right, config.sad, sobel=sobel), None
-    lazy = RegionDisparity(left, right, config.sad, want_l, want_r, sobel=sobel)
+    lazy = RegionDisparity(left, right, config.sad, want_l, want_r, sobel=sobel, _runs=(*runs, *plans))
     return lazy.result, lazy
 
 

@@ -1179,10 +1179,10 @@ def _run_kernel(left8, right8, sobel_left, sobel_right, config: SADConfig, left_
     return _run_prepared(prep, left_runs, right_runs, volume)
 
 
-def _run_prepared(prep: PreparedPair, left_runs, right_runs, volume=None, out=None) -> DisparityResult:
+def _run_prepared(prep: PreparedPair, left_runs, right_runs, volume=None, out=None, plans=None) -> DisparityResult:
     """:func:`_sad_kernel` on a prepared pair. ``out``: None (fresh outputs, frozen on the way out) or the
     (left, right, valid) arrays to write the requested pixels into (left unchanged elsewhere; returned as
-    they are)."""
+    they are). ``plans``: the :func:`_planning_runs` of ``left_runs`` and ``right_runs`` if already made."""
     config = prep.config
     n_rows, n_cols = prep.shape
     if out is None:
@@ -1203,8 +1203,8 @@ def _run_prepared(prep: PreparedPair, left_runs, right_runs, volume=None, out=No
             off,
             _key_shift(config.num_disparities), config.uniqueness_ratio, config.subpixel, float(config.lr_tolerance),
             left_runs[0], left_runs[1], right_runs[0], right_runs[1],
-            _planning_runs(*left_runs, config.num_disparities, _STEP, n_cols),
-            _planning_runs(*right_runs, config.num_disparities, _STEP, n_cols),
+            *(plans if plans is not None else
+              [_planning_runs(*runs, config.num_disparities, _STEP, n_cols) for runs in (left_runs, right_runs)]),
             np.zeros(config.num_disparities, _cost_dtype(config)), out_left, out_right, valid,
             np.zeros((0, 0, 0), np.int64) if volume is None else volume,
         )  # fmt: skip

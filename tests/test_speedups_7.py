@@ -443,3 +443,92 @@ def test_front_disparity_equals_the_reference(scenario_frames, scenario_models):
                 assert lazy.found(0) == ref.found(0) and lazy.found(1) == ref.found(1)
                 n_lazy += 1
     assert n_lazy >= 8
+
+
+# ------------------------------------------------------------------ the depth step beyond an edge
+def edge_depth_step_reference(camera, X, world_map, plane, edge, offset_px):
+    """The former :func:`~stablemarks.landmarks.edge_depth_step`: the edge's depth and the ray past it from
+    ``to_camera`` and ``column_ray``."""
+    P = plane.edge(edge)
+    u_e = float(camera.project_columns(X, P)[0])
+    u_i = float(L._inner_columns(camera, X, plane, edge)[0])
+    if not np.isfinite(u_e + u_i):
+        return 0.0
+    u_out = u_e + np.sign(u_e - u_i) * offset_px
+    fb = camera.f * camera.baseline
+    _, Z_e = camera.to_camera(X, P)
+    ray = camera.column_ray(X, u_out)
+    walls, exclude = L._other_walls(world_map, plane)
+    dist = L.ray_distances(camera.optical_centres(X)[0], ray, walls, exclude=exclude)[0]
+    cam = camera.camera_pose(X)
+    Z_bg = dist * (ray @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
+    return float((fb / Z_bg if np.isfinite(Z_bg) and Z_bg > 0 else 0.0) - fb / Z_e)
+
+
+def test_edge_depth_step_equals_the_reference(scenario_frames):
+    """Both ends of every wall of every scenario map, from every frame's pose and perturbed ones, two offsets: the
+    same step bit for bit (open space, a nearer wall, an edge behind the camera)."""
+    config = Config()
+    rng = np.random.default_rng(41)
+    n = n_open = 0
+    for frame in scenario_frames:
+        camera = config.camera(frame[4])
+        for X in [frame[6]] + [frame[6] + rng.normal(0, [0.5, 0.5, 0.3]) for _ in range(3)]:
+            for plane in frame[5]:
+                for edge in ("p1", "p2"):
+                    for offset in (8.5, 20.0):
+                        got = L.edge_depth_step(camera, X, frame[5], plane, edge, offset)
+                        want = edge_depth_step_reference(camera, X, frame[5], plane, edge, offset)
+                        assert type(got) is float and got == want
+                        n += got != 0.0
+                        n_open += got < 0
+    assert n > 200 and n_open > 20
+
+
+# ------------------------------------------------------------------ the boundary search's row ends, read in place
+def block_boundary_columns_reference(block, v0, u0, W, lo, hi, outward, max_hole=2):
+    """The former :func:`~stablemarks.landmarks._block_boundary_columns`: the window's columns copied out of the
+    block (False off it), then :func:`~stablemarks.landmarks._row_ends`."""
+    import math
+
+    c0 = math.floor(min(max(lo, 0), W - 1))
+    c1 = math.ceil(min(max(hi, 0), W - 1))
+    if c1 < c0:
+        return np.zeros(0, int), np.zeros(0)
+    h, w = block.shape
+    window = np.zeros((h, c1 - c0 + 1), dtype=np.bool_)
+    a, b = max(c0, u0), min(c1, u0 + w - 1)
+    if b >= a:
+        window[:, a - c0 : b - c0 + 1] = block[:, a - u0 : b - u0 + 1]
+    rows, cols = L._row_ends(window, 0, c1 - c0, int(outward), int(max_hole))
+    return rows + v0, cols + c0
+
+
+def test_block_boundary_columns_equal_the_reference(scenario_models):
+    """Random blocks with holes, and every fitted region of the scenario frames, through windows inside, across and
+    outside the block, both ways, holes of 0 to 8 px bridged: the same rows and columns, bit for bit."""
+    rng = np.random.default_rng(43)
+    blocks = []
+    for _ in range(40):
+        h, w = (int(v) for v in rng.integers(1, 30, 2))
+        blk = rng.random((h, w)) < rng.uniform(0.3, 0.95)
+        blocks.append((blk, int(rng.integers(0, 50)), int(rng.integers(0, 100)), 200))
+    for _, _, _, model in scenario_models:
+        for fit in model.fits:
+            if fit:
+                H, W = fit.region.shape
+                v0, v1, _ = fit.box[0].indices(H)
+                blocks.append((fit.region[v0:max(v0, v1)], v0, 0, W))
+    n = 0
+    for blk, v0, u0, W in blocks:
+        for _ in range(15):
+            lo = float(rng.uniform(-20, W + 20))
+            hi = lo + float(rng.uniform(-5, 80))
+            for outward in (-1, 1):
+                hole = int(rng.integers(0, 9))
+                got = L._block_boundary_columns(blk, v0, u0, W, lo, hi, outward, hole)
+                want = block_boundary_columns_reference(blk, v0, u0, W, lo, hi, outward, hole)
+                for x, y in zip(got, want, strict=True):
+                    assert x.dtype == y.dtype and np.array_equal(x, y)
+                n += len(got[0])
+    assert n > 1000

@@ -297,13 +297,52 @@ def _block_boundary_columns(block: np.ndarray, v0: int, u0: int, W: int, lo: flo
     c1 = math.ceil(min(max(hi, 0), W - 1))
     if c1 < c0:
         return np.zeros(0, int), np.zeros(0)
+    return _block_row_ends(np.ascontiguousarray(block, dtype=np.bool_), int(v0), int(u0), c0, c1, int(outward),
+                           int(max_hole))
+
+
+@njit(cache=True)
+def _block_row_ends(block, v0, u0, c0, c1, outward, max_hole):  # pragma: no cover - numba
+    """:func:`_row_ends` of the window of columns ``c0…c1`` of a region that is ``block`` (h, w) at rows ``v0…``,
+    columns ``u0…`` and False elsewhere, read in place (no copy of the window): the same walk, pixel for pixel;
+    rows and columns in image coordinates."""
     h, w = block.shape
-    window = np.zeros((h, c1 - c0 + 1), dtype=np.bool_)  # the window's columns, False off the block
-    a, b = max(c0, u0), min(c1, u0 + w - 1)
-    if b >= a:
-        window[:, a - c0 : b - c0 + 1] = block[:, a - u0 : b - u0 + 1]
-    rows, cols = _row_ends(window, 0, c1 - c0, int(outward), int(max_hole))
-    return rows + v0, cols + c0
+    n = c1 - c0 + 1
+    first = c1 if outward < 0 else c0  # the image column of position j from the inner side: first + step·j
+    step = -1 if outward < 0 else 1
+    rows = np.empty(h, dtype=np.int64)
+    cols = np.empty(h, dtype=np.float64)
+    k = 0
+    for i in range(h):
+        start = n
+        for j in range(n):
+            c = first + step * j - u0
+            if 0 <= c < w and block[i, c]:
+                start = j
+                break
+        last = -1  # the run's last pixel, once a hole not crossed ends it
+        j = start + 1
+        while j < n:
+            c = first + step * j - u0
+            if 0 <= c < w and block[i, c]:
+                j += 1
+                continue
+            q = j + 1  # the next region pixel after the hole that starts at j
+            while q < n:
+                c = first + step * q - u0
+                if 0 <= c < w and block[i, c]:
+                    break
+                q += 1
+            if q < n and q - j <= max_hole:
+                j = q
+            else:
+                last = j - 1
+                break
+        if last >= 0:
+            rows[k] = v0 + i
+            cols[k] = float(first + step * last)
+            k += 1
+    return rows[:k].copy(), cols[:k].copy()
 
 
 @njit(cache=True)
@@ -1346,10 +1385,16 @@ def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, o
     u_i = float(_inner_columns(camera, X, plane, edge)[0])
     if not np.isfinite(u_e + u_i):
         return 0.0
-    u_out = u_e + np.sign(u_e - u_i) * offset_px
+    u_out = u_e + float(np.sign(u_e - u_i)) * offset_px
     fb = camera.f * camera.baseline
-    _, Z_e = camera.to_camera(X, P)
-    ray = camera.column_ray(X, u_out)
+    # to_camera and column_ray of one point / one column on Python floats: the same operations (the ray's norm the
+    # square root of its two squares summed, as np.linalg.norm along an axis)
+    cx, cy, _, c, s = camera._frame(X)
+    Z_e = c * (float(P[0]) - cx) + s * (float(P[1]) - cy)
+    xn = (u_out - camera.cu) / camera.f
+    r0, r1 = c + s * xn, s - c * xn
+    norm = math.sqrt(r0 * r0 + r1 * r1)
+    ray = np.array([r0 / norm, r1 / norm])
     walls, exclude = _other_walls(world_map, plane)
     dist = ray_distances(camera.optical_centres(X)[0], ray, walls, exclude=exclude)[0]
     cam = camera.camera_pose(X)

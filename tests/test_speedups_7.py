@@ -532,3 +532,57 @@ def test_block_boundary_columns_equal_the_reference(scenario_models):
                     assert x.dtype == y.dtype and np.array_equal(x, y)
                 n += len(got[0])
     assert n > 1000
+
+
+# ------------------------------------------------------------------ plane members counted in one pass
+def plane_members_reference(fit, pairs, left_segments, config):
+    """The former :func:`~stablemarks.planes.plane_members`: the agreeing pairs' pixels gathered by ``np.repeat``,
+    their hits counted by ``np.bincount``."""
+    n = len(pairs)
+    out = np.zeros(n, dtype=bool)
+    if n == 0:
+        return out
+    u0, u1 = fit.prediction.window
+    d_pred, s_pred = fit.prediction.disparity_at(pairs.u_left)
+    inside = (pairs.u_left >= u0 - 0.5) & (pairs.u_left <= u1 + 0.5)
+    agree = np.flatnonzero(inside & (np.abs(pairs.disparity - d_pred) <= fit.prediction.gate * s_pred))
+    if len(agree) == 0:
+        return out
+    H, W = fit.region.shape
+    px = max(0, config.member_dilate_px)
+    v0, v1, _ = fit.box[0].indices(H)
+    c0, c1, _ = fit.box[1].indices(W)
+    v0, v1, c0, c1 = max(0, v0 - px), min(H, v1 + px), max(0, c0 - px), min(W, c1 + px)
+    region = P.dilate(fit.region[v0:v1, c0:c1], px)
+    seg = np.asarray(pairs.left_index)[agree].astype(np.int64)
+    starts = left_segments.pixel_offsets[seg]
+    counts = left_segments.pixel_offsets[seg + 1] - starts
+    ends = np.cumsum(counts)
+    pix = left_segments.pixel_uv[np.repeat(starts - ends + counts, counts) + np.arange(ends[-1])]
+    u = np.clip(pix[:, 0], 0, W - 1) - c0
+    v = np.clip(pix[:, 1], 0, H - 1) - v0
+    ok = (u >= 0) & (u < region.shape[1]) & (v >= 0) & (v < region.shape[0])
+    hit = np.zeros(len(pix))
+    hit[ok] = region[v[ok], u[ok]]
+    n_in = np.bincount(np.repeat(np.arange(len(seg)), counts), weights=hit, minlength=len(seg))
+    frac = np.where(counts > 0, n_in / np.maximum(counts, 1), 0.0)
+    out[agree] = frac >= config.member_min_fraction
+    return out
+
+
+def test_plane_members_equal_the_reference(scenario_models):
+    """Every fit of every scenario frame with all the frame's pairs and the kept ones, the least fraction (0 to 1: a
+    fraction equal to it is decided alike) and the dilation varied: the same members."""
+    n = 0
+    for _, _, front, model in scenario_models:
+        for fit in model.fits:
+            if not fit:
+                continue
+            for pairs in (front.pairs, front.kept_pairs):
+                for frac in (0.0, 0.3, 0.5, 0.75, 1.0):
+                    for dil in (0, 3):
+                        pc = P.PlaneConfig(member_min_fraction=frac, member_dilate_px=dil)
+                        got = P.plane_members(fit, pairs, front.left_segments, pc)
+                        assert np.array_equal(got, plane_members_reference(fit, pairs, front.left_segments, pc))
+                        n += int(got.sum())
+    assert n > 200

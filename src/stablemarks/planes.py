@@ -631,19 +631,32 @@ def plane_members(fit: PlaneFit, pairs, left_segments, config: PlaneConfig = Pla
     region = dilate(fit.region[v0:v1, c0:c1], px)
     # every pixel of the agreeing pairs' left segments, segment after segment
     seg = np.asarray(pairs.left_index)[agree].astype(np.int64)
-    starts = left_segments.pixel_offsets[seg]
-    counts = left_segments.pixel_offsets[seg + 1] - starts
-    ends = np.cumsum(counts)
-    pix = left_segments.pixel_uv[np.repeat(starts - ends + counts, counts) + np.arange(ends[-1])]
-    u = np.clip(pix[:, 0], 0, W - 1) - c0
-    v = np.clip(pix[:, 1], 0, H - 1) - v0
-    ok = (u >= 0) & (u < region.shape[1]) & (v >= 0) & (v < region.shape[0])
-    hit = np.zeros(len(pix))
-    hit[ok] = region[v[ok], u[ok]]
-    n_in = np.bincount(np.repeat(np.arange(len(seg)), counts), weights=hit, minlength=len(seg))
-    frac = np.where(counts > 0, n_in / np.maximum(counts, 1), 0.0)
+    frac = _member_fractions(seg, np.asarray(left_segments.pixel_offsets, np.int64), left_segments.pixel_uv,
+                             np.ascontiguousarray(region), c0, v0, H, W)
     out[agree] = frac >= config.member_min_fraction
     return out
+
+
+@njit(cache=True)
+def _member_fractions(seg, offsets, pixel_uv, region, c0, v0, H, W):  # pragma: no cover - numba
+    """:func:`plane_members`' fraction (n,) of each segment ``seg[i]``'s pixels that lie in ``region`` (the dilated
+    region's box, rows ``v0 …``, columns ``c0 …``): each pixel clipped to the image, outside the box not in it;
+    0 for a segment without pixels. One pass over the pixels (what the array expressions computed: the counts
+    are exact, the same division)."""
+    h, w = region.shape
+    frac = np.zeros(len(seg))
+    for i in range(len(seg)):
+        a, b = offsets[seg[i]], offsets[seg[i] + 1]
+        if b <= a:
+            continue
+        n_in = 0.0
+        for q in range(a, b):
+            u = min(max(np.int64(pixel_uv[q, 0]), 0), W - 1) - c0
+            v = min(max(np.int64(pixel_uv[q, 1]), 0), H - 1) - v0
+            if u >= 0 and u < w and v >= 0 and v < h and region[v, u]:
+                n_in += 1.0
+        frac[i] = n_in / float(max(b - a, 1))
+    return frac
 
 
 def dilate(region: np.ndarray, px: int) -> np.ndarray:

@@ -107,7 +107,9 @@ def _with_and_without_the_silhouette_rule(name: str, k: int, pan: float, wall: s
     """Frame ``k`` of ``name``'s first trial at the true pose, modelled with the silhouette rule (default) and
     without it: ``{nearer_fraction: (frame, the candidates on wall, the one within 1 px of the column where
     occluder's end is seen)}``. With the noise of the time the case was found (σ_img 0.25 px, a snapped
-    boundary 2 px, no shared disparity error): with the line noise at its measured 0.05 px the far board's fit,
+    boundary 2 px, no shared disparity error) and the off-wall test of the time (the model's line noise alone:
+    with the noise the frame's own lines show, ``landmarks.off_wall_min_lines``, the mixed pair is off its wall):
+    with the line noise at its measured 0.05 px the far board's fit,
     half hidden behind the near one, is refused as turned from the map before any line on it is modelled."""
     from stablemarks.evaluation import trial_seeds
 
@@ -118,7 +120,7 @@ def _with_and_without_the_silhouette_rule(name: str, k: int, pan: float, wall: s
     front = None
     out = {}
     for fraction in (0.5, 1.0):
-        cfg = Config().with_overrides({"landmarks": {"nearer_fraction": fraction},
+        cfg = Config().with_overrides({"landmarks": {"nearer_fraction": fraction, "off_wall_min_lines": 0},
                                        "noise": {"sigma_img": 0.25, "boundary_px": 2.0},
                                        "planes": {"disparity_bias_px": 0.0}})
         cfg = cfg.with_source_defaults(source.config_defaults)

@@ -161,3 +161,146 @@ def test_a_textureless_strip_inside_the_edge_does_not_move_the_boundary():
     assert abs(b.P[0] - 0.0) < 0.02, b.P
     bar = sorted(c.s for c in res.candidates if c.selected and c.s > 0.5)
     assert bar == pytest.approx([0.8, 0.84], abs=0.01)
+
+
+def _lines(offsets, sigma=0.1, fit=0.0, selected=True):
+    return [_replace_cand(_cand(offset=o, sigma=float(np.hypot(sigma, fit))), sigma_wall_fit=fit, selected=selected)
+            for o in offsets]
+
+
+def _replace_cand(c, **kw):
+    from dataclasses import replace
+
+    return replace(c, **kw)
+
+
+def test_the_line_noise_scale_is_the_robust_spread_of_the_frames_lines():
+    from stablemarks.landmarks import line_noise_scale
+
+    rng = np.random.default_rng(3)
+    offsets = 0.1 * 0.2 * rng.standard_normal(400)  # lines 5 times better than the model's σ of 0.1 m
+    assert line_noise_scale(_lines(offsets), 10) == pytest.approx(0.2, rel=0.1)
+    # a quarter of the lines far off their wall (clutter) takes the median to the inliers' 67th percentile of
+    # |z| (1.43 times their median), not to the clutter
+    clutter = np.concatenate([offsets[:300], np.full(100, 0.5)])
+    assert 0.2 < line_noise_scale(_lines(clutter), 10) < 0.3
+    # the fit's part of σ is left out: the same offsets with a fit σ of 0.05 m give the same scale
+    assert line_noise_scale(_lines(offsets, fit=0.05), 10) == pytest.approx(0.2, rel=0.1)
+    assert line_noise_scale(_lines(10 * offsets), 10) == 1.0  # never looser than the model
+    assert line_noise_scale(_lines(offsets), 10, floor=0.5) == 0.5  # never below the floor
+    assert line_noise_scale(_lines(offsets[:9]), 10) == 1.0  # too few lines to say
+    assert line_noise_scale(_lines(offsets), 0) == 1.0  # switched off
+
+
+def test_the_frames_line_noise_rejects_a_line_the_models_noise_lets_through():
+    from stablemarks.landmarks import PlaneLandmarks, off_wall_by_lines
+
+    rng = np.random.default_rng(4)
+    lines = _lines(0.1 * 0.2 * rng.standard_normal(20))
+    lines.append(_replace_cand(_cand(offset=0.2, sigma=0.1), sigma_wall_fit=0.0, selected=True))  # 2 σ: kept
+    assert all(on_wall_reason(c, LandmarkConfig()) == "" for c in lines)
+    model = PlaneLandmarks(None, [], np.zeros(0, int), lines)
+    (out,), scale = off_wall_by_lines([model], LandmarkConfig(), sigma_img=0.25)
+    assert scale < 0.4
+    assert [c.reason for c in out.candidates] == [""] * 20 + [REASON_OFF_WALL]
+    assert not out.candidates[-1].selected
+    # the model's σ alone (the paper's test): nothing changes, the same object comes back
+    (same,), scale = off_wall_by_lines([model], LandmarkConfig(off_wall_min_lines=0), sigma_img=0.25)
+    assert scale == 1.0 and same is model
+    # a floor of the line noise at the model's σ: nothing changes either
+    (same,), _ = off_wall_by_lines([model], LandmarkConfig(off_wall_floor_px=0.25), sigma_img=0.25)
+    assert same.candidates[-1].selected
+
+
+@pytest.mark.parametrize(("key", "value", "what"), [("off_wall_min_lines", -1, "a whole number >= 0"),
+                                                    ("off_wall_min_lines", 2.5, "a whole number >= 0"),
+                                                    ("off_wall_floor_px", 0.0, "a positive number")])
+def test_off_wall_settings_are_checked(key, value, what):
+    with pytest.raises(Exception, match=f"landmarks.{key}: expected {what}"):
+        LandmarkConfig(**{key: value})
+
+
+def test_a_desks_edge_in_front_of_a_wall_is_rejected_with_the_lines_own_noise():
+    """A dark desk 0.2 m in front of a wall 6 m away: its edge is 0.7 σ off the wall with the model's line noise
+    (0.25 px) and is taken for a wall line by the paper's test; with the noise the frame's lines show it is off
+    the wall, and the wall's eight painted lines stay selected."""
+    wall = {"id": "wall", "p1": [-1.0, 6.0], "p2": [3.0, 6.0], "z": [0.0, 2.5], "free_edges": ["p1"],
+            "texture": TEXTURE}
+    back = dict(BACK, p1=[-6.0, 9.5], p2=[6.0, 9.5])
+    feats = [{"id": f"f{i}", "wall": "wall", "s": s, "z": [0.3, 2.0], "kind": "bar", "width": 0.05, "contrast": c}
+             for i, (s, c) in enumerate([(0.4, -60), (0.9, 50), (1.5, -70), (2.3, 60)])]
+    desk = {"boxes": [{"id": "desk", "center": [1.3, 5.5], "size": [0.6, 0.6], "yaw_deg": 0, "height": 0.75,
+                       "texture": {"kind": "plain", "base": 40}}]}
+    sc = parse_scenario({"name": "desk", "camera": CAMERA, "walls": [wall, back], "features": feats,
+                         "clutter": desk, "robot": {"start": {"x": 0.3, "y": 0.0, "theta_deg": 90}}}, "test")
+    X = np.array([0.3, 0.0, np.pi / 2])
+    cov = np.diag([0.02, 0.02, np.radians(0.5)]) ** 2
+    f = render_stereo(sc, X, 0.0, np.random.default_rng(1))
+
+    def run(**landmarks):
+        res = process_frame(f.left, f.right, sc.camera, sc.map, X, cov, Config().with_overrides(
+            {"landmarks": landmarks}))
+        on_desk = [c for c in res.candidates if abs(c.P_observed[0] - 1.0) < 0.08]
+        painted = sorted(round(float(c.P_observed[0]), 2) for c in res.candidates if c.selected)
+        return on_desk, painted
+
+    on_desk, _ = run(off_wall_min_lines=0)
+    assert on_desk and any(c.selected for c in on_desk), [(c.P_observed, c.reason) for c in on_desk]
+    on_desk, painted = run()
+    assert on_desk and all(not c.selected and c.reason == REASON_OFF_WALL for c in on_desk)
+    bars = [x - 1.0 + s for s in (0.4, 0.9, 1.5, 2.3) for x in (-0.025, 0.025)]
+    assert len(painted) == 8 and np.allclose(painted, bars, atol=0.03), painted
+
+
+def test_a_landmark_whose_line_a_frame_finds_off_its_wall_is_dropped():
+    """An edge in front of a wall that passed one frame's test by chance is a landmark; the next frame that finds
+    its line off the wall drops it, while a landmark whose line is on the wall, or off it only along the wall
+    within its σ, is kept."""
+    from types import SimpleNamespace
+
+    from stablemarks.estimation import JointEKF, NewLandmark
+    from stablemarks.geometry import StereoCamera
+    from stablemarks.methods import METHODS
+
+    wall = ReferencePlane("w", (-1.5, 5.0), (1.5, 5.0), free_edges=("p1",))
+    ekf = JointEKF(StereoCamera(), np.array([0.0, 0.0, np.pi / 2]), np.diag([1e-4, 1e-4, 1e-6]))
+    a, b = ekf.add_landmarks([NewLandmark.wall(wall, 1.0), NewLandmark.wall(wall, 2.0)], 1e-4 * np.eye(2))
+
+    def cand(pair, s, reason):
+        c = _cand()
+        return _replace_cand(c, plane_id="w", pair=pair, P=np.array([-1.5 + s, 5.0]), sigma_f=0.003,
+                             sigma_b=0.01, reason=reason, selected=not reason)
+
+    model = SimpleNamespace(candidates=[cand(0, 1.001, ""), cand(1, 2.002, REASON_OFF_WALL)])
+    keep, dropped = METHODS["stablemarks"]().recheck(ekf, model, [(a, 0), (b, 1)], 3.0)
+    assert keep == [(a, 0)] and dropped == [b]
+    model = SimpleNamespace(candidates=[cand(0, 1.001, ""), cand(1, 2.002, "near boundary")])
+    keep, dropped = METHODS["stablemarks"]().recheck(ekf, model, [(a, 0), (b, 1)], 3.0)
+    assert keep == [(a, 0), (b, 1)] and dropped == []
+
+
+def test_an_edge_nearer_than_block_matching_searches_is_not_searched():
+    """A panel's free end 0.85 m in front of the lab's camera (f·b = 60 px·m: 70 px of disparity) lies beyond the 64
+    disparities searched: its region would end where the panel leaves the range, not at its end, so the end is not
+    searched, and the log says why and which settings hold the range; with 96 disparities it is found."""
+    panel = {"id": "panel", "p1": [0.0, 0.85], "p2": [1.5, 1.6], "z": [0.0, 1.8], "free_edges": ["p1"],
+             "texture": TEXTURE}
+    sc = parse_scenario({"name": "near", "camera": CAMERA, "walls": [panel, BACK], "features": [],
+                         "robot": {"start": {"x": 0.0, "y": 0.0, "theta_deg": 90}}}, "test")
+    X = np.array([0.0, 0.0, np.pi / 2])
+    cov = np.diag([0.01, 0.01, np.radians(0.5)]) ** 2
+    f = render_stereo(sc, X, 0.0, np.random.default_rng(2))
+
+    def run(n):
+        res = process_frame(f.left, f.right, sc.camera, sc.map, X, cov, Config().with_overrides(
+            {"sad": {"num_disparities": n}}))
+        (m,) = [m for m in res.planes if m.fit.plane.id == "panel"]
+        return m, res.warnings
+
+    m, warnings = run(64)
+    assert "p1" not in m.searched and not m.boundaries
+    assert any("beyond the 0–63 px block matching searches (sad.min_disparity, sad.num_disparities): not searched"
+               in w for w in warnings), warnings
+    m, _ = run(96)
+    assert "p1" in m.searched and len(m.boundaries) == 1
+    assert np.hypot(*(m.boundaries[0].P - np.array([0.0, 0.85]))) < 0.03, m.boundaries[0].P

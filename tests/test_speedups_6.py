@@ -314,7 +314,8 @@ def model_features_reference(
     k, P_f, cov_f = k[ok], P_f[ok], cov_f[ok]
     # Eq 12's innovation before the fusion: is the line on the fitted wall at all?
     G, J_G_P, J_G_R = fit.constraint(P_f)
-    var_G = np.einsum("i,kij,j->k", J_G_P, cov_f, J_G_P) + np.einsum("ki,ij,kj->k", J_G_R, fit.cov_R, J_G_R)
+    var_G_fit = np.einsum("ki,ij,kj->k", J_G_R, fit.cov_R, J_G_R)
+    var_G = np.einsum("i,kij,j->k", J_G_P, cov_f, J_G_P) + var_G_fit
     P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
     d_p = (P_hat - boundary.P) @ t
     sigma_f = np.sqrt(np.einsum("i,kij,j->k", t, cov_hat, t))
@@ -349,7 +350,8 @@ def model_features_reference(
                       P_observed=P_hat[j], cov_observed=cov_hat[j], sigma_b_measured=boundary.sigma_along_measured,
                       contrast=np.inf if contrast is None else float(contrast[i]),
                       wall_offset=float(G[j]), sigma_wall_offset=float(np.sqrt(var_G[j])),
-                      height_margin=float(margin[j]), range=float(dist[j]), incidence=float(incidence[j]),
+                      sigma_wall_fit=float(np.sqrt(var_G_fit[j])), height_margin=float(margin[j]),
+                      range=float(dist[j]), incidence=float(incidence[j]),
                       shared_jacobian=None if J_shared is None else J_shared[j], shared_cov=cov_shared,
                       sigma_own=np.nan if J_shared is None else float(sigma_own[j]))
         )

@@ -200,11 +200,12 @@ class Config:
 
 PRESETS = {
     "paper": {"noise": {"sigma_img": 0.5, "boundary_px": None, "free_boundary_px": None},
-              "ekf": {"edge_updates": False}},
+              "ekf": {"edge_updates": False}, "landmarks": {"off_wall_min_lines": 0}},
 }
 """Named configurations: ``paper`` — the paper's σ_img = 0.5 px (Sec 2.3.1), a boundary known to within the
 SAD window (``w / sqrt(12)``), which reproduce Table 1's σ, and a filter
-that uses a boundary only to model landmarks (no ``ekf.edge_updates``), as the paper's; the defaults are
+that uses a boundary only to model landmarks (no ``ekf.edge_updates``) and tests a line's offset from its wall
+with the model's noise alone (``landmarks.off_wall_min_lines`` 0), as the paper's; the defaults are
 measured instead (``stablemarks calibrate-noise``)."""
 
 

@@ -57,11 +57,14 @@ class LandmarkConfig:
         if self.filter_boundary_sigma not in ("measured", "model"):
             raise InputError(expected("'measured' or 'model'", self.filter_boundary_sigma,
                                       where="landmarks.filter_boundary_sigma"))
-        for name in ("off_wall_sigma", "row_sigma_px", "max_range", "max_incidence_deg", "boundary_gate_sigma",
-                     "fit_gate_chi2", "nearer_fraction"):
+        for name in ("off_wall_sigma", "off_wall_floor_px", "row_sigma_px", "max_range", "max_incidence_deg",
+                     "boundary_gate_sigma", "fit_gate_chi2", "nearer_fraction"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0):
                 raise InputError(expected("a positive number", v, where=f"landmarks.{name}"))
+        v = self.off_wall_min_lines
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise InputError(expected("a whole number >= 0", v, where="landmarks.off_wall_min_lines"))
         if not (np.isfinite(self.min_contrast) and self.min_contrast >= 0):
             raise InputError(expected("a number of gray levels >= 0", self.min_contrast,
                                       where="landmarks.min_contrast"))
@@ -103,8 +106,24 @@ class LandmarkConfig:
     """A candidate is on its wall only if its triangulated position agrees with the fitted plane (the
     innovation of the point-on-plane update, Eqs 12–14) within this many σ; farther is "off the wall" (a
     pole or a box corner standing in front of it). The smallest offset this resolves at range ``Z`` seen
-    frontally is about ``off_wall_sigma · sqrt(2) σ_img · Z² / (f b)``: 0.17 m at 4 m and 0.38 m at 6 m with
-    σ_img = 0.15 px, f = 500 px, b = 0.12 m (0.57 m and 1.27 m with the paper's 0.5 px)."""
+    frontally is about ``off_wall_sigma · sqrt(2) σ_line · Z² / (f b)``, σ_line the lines' column noise:
+    the model's ``noise.sigma_img`` (0.28 m at 4 m and 0.64 m at 6 m with 0.25 px, f = 500 px, b = 0.12 m;
+    1.27 m at 6 m with the paper's 0.5 px), or what the frame's own lines show (``off_wall_min_lines``)."""
+    off_wall_min_lines: int = 10
+    """With at least this many candidate lines in a frame, the off-wall test takes the lines' column noise from
+    the lines themselves (:func:`line_noise_scale`): 1.4826 × the median of ``|G| / σ_G`` over all of them (the
+    offset from their fitted walls in units of what ``noise.sigma_img`` predicts; the median ignores the lines
+    of clutter as long as they are fewer than half), when that is below 1. The model's σ_img is kept wide for
+    the filter, which must also absorb errors that are not line noise; measured on the simulator's lines it is
+    5–10 times their scatter, and a desk's edge 0.2 m in front of a wall at 6.5 m was 1–2.4 σ off its wall with
+    it and 4–12 σ with the lines' own scatter. The data can only make the test stricter than the model, never
+    looser. 0: the model's σ_img alone (the paper's test)."""
+    off_wall_floor_px: float = 0.05
+    """The least column noise [px] the off-wall test assumes of a line, however clean the frame's lines look:
+    a single line errs by its own texture and by sub-pixel interpolation's pull towards whole pixels, which the
+    spread of many lines understates (measured on the simulator's walls: lines 0.01–0.07 px RMS from their true
+    edges, by wall; a painted bar 0.2 m from a clean wall's edge was 4 σ off its wall with the median spread of
+    its frame's lines alone)."""
     row_sigma_px: float = 2.0
     """σ of a segment's end row [px], for the height test: a candidate's ends must lie within the wall's
     mapped ``z`` range widened by ``off_wall_sigma`` σ of their height (rows and depth); beyond it the line
@@ -205,7 +224,8 @@ class Candidate:
     sigma_b_measured : the boundary's σ along the wall without the SAD window allowance [m] (see
         :attr:`LandmarkConfig.filter_boundary_sigma`).
     wall_offset, sigma_wall_offset : the triangulated point's offset from the fitted plane along its normal
-        before the plane constraint (Eq 12's ``G``) and its σ (image noise and the fit) [m].
+        before the plane constraint (Eq 12's ``G``) and its σ (image noise and the fit) [m];
+        ``sigma_wall_fit`` the fit's part of that σ [m].
     height_margin : how far [m] the segment's ends may reach beyond the wall's mapped height (``k`` σ of the
         heights from the rows and the depth).
     range : distance from the left optical centre [m]; ``incidence`` the angle between the viewing ray and
@@ -244,6 +264,7 @@ class Candidate:
     sigma_b_measured: float = np.nan
     wall_offset: float = 0.0
     sigma_wall_offset: float = np.inf
+    sigma_wall_fit: float = 0.0
     height_margin: float = np.inf
     range: float = 0.0
     incidence: float = 0.0
@@ -638,7 +659,8 @@ def model_features(
     k, P_f, cov_f = k[ok], P_f[ok], cov_f[ok]
     # Eq 12's innovation before the fusion: is the line on the fitted wall at all?
     G, J_G_P, J_G_R = fit.constraint(P_f)
-    var_G = np.einsum("i,kij,j->k", J_G_P, cov_f, J_G_P) + np.einsum("ki,ij,kj->k", J_G_R, fit.cov_R, J_G_R)
+    var_G_fit = np.einsum("ki,ij,kj->k", J_G_R, fit.cov_R, J_G_R)
+    var_G = np.einsum("i,kij,j->k", J_G_P, cov_f, J_G_P) + var_G_fit
     P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
     d_p = (P_hat - boundary.P) @ t
     sigma_f = np.sqrt(np.einsum("i,kij,j->k", t, cov_hat, t))
@@ -662,8 +684,9 @@ def model_features(
                                                            t, config.filter_boundary_sigma == "measured")
     # the per-candidate numbers as Python floats in one conversion per array (``tolist``: the same values as
     # ``float(a[j])``; the square root of var_G element-wise, as of each element)
-    d_l, sf_l, zl_l, zh_l, G_l, sG_l, m_l, dist_l, inc_l = (
-        a.tolist() for a in (d_p, sigma_f, z_low, z_high, G, np.sqrt(var_G), margin, dist, incidence))
+    d_l, sf_l, zl_l, zh_l, G_l, sG_l, sGf_l, m_l, dist_l, inc_l = (
+        a.tolist() for a in (d_p, sigma_f, z_low, z_high, G, np.sqrt(var_G), np.sqrt(var_G_fit), margin, dist,
+                             incidence))
     ls_l, ul_l, ur_l, vt_l, vb_l = (np.asarray(a, dtype=float)[k].tolist() for a in (
         pairs.length_similarity, pairs.u_left, pairs.u_right, pairs.v_top, pairs.v_bottom))
     c_l = [np.inf] * len(k) if contrast is None else np.asarray(contrast, dtype=float)[k].tolist()
@@ -680,7 +703,7 @@ def model_features(
             v_top=vt_l[j], v_bottom=vb_l[j], selected=False, reason="",
             P_observed=P_hat[j], cov_observed=cov_hat[j], contrast=c_l[j],
             sigma_b_measured=boundary.sigma_along_measured, wall_offset=G_l[j], sigma_wall_offset=sG_l[j],
-            height_margin=m_l[j], range=dist_l[j], incidence=inc_l[j],
+            sigma_wall_fit=sGf_l[j], height_margin=m_l[j], range=dist_l[j], incidence=inc_l[j],
             shared_jacobian=None if J_shared is None else J_shared[j], shared_cov=cov_shared, sigma_own=so_l[j])))
     return out
 
@@ -814,6 +837,47 @@ def on_wall_reason(c: Candidate, config: LandmarkConfig, z_range: tuple[float, f
     return ""
 
 
+def line_noise_scale(candidates: list[Candidate], min_lines: int, floor: float = 0.0) -> float:
+    """The lines' column noise in this frame as a fraction of the model's (``noise.sigma_img``), in
+    ``[floor, 1]``: ``1.4826 · median |G| / σ_line`` over the candidates (``G`` their offset from the fitted wall,
+    ``σ_line`` its σ from the lines' columns alone, :attr:`Candidate.sigma_wall_offset` without the fit's part).
+    1 with fewer than ``min_lines`` candidates, or ``min_lines`` 0 (:attr:`LandmarkConfig.off_wall_min_lines`)."""
+    if min_lines <= 0 or len(candidates) < min_lines:
+        return 1.0
+    z = []
+    for c in candidates:
+        var_line = c.sigma_wall_offset**2 - c.sigma_wall_fit**2
+        if np.isfinite(c.wall_offset) and np.isfinite(var_line) and var_line > 0:
+            z.append(abs(c.wall_offset) / math.sqrt(var_line))
+    if len(z) < min_lines:
+        return 1.0
+    return min(1.0, max(floor, 1.4826 * float(np.median(z))))
+
+
+def off_wall_by_lines(models: list[PlaneLandmarks], config: LandmarkConfig, sigma_img: float
+                      ) -> tuple[list[PlaneLandmarks], float]:
+    """The off-wall test again, for the candidates of all the frame's planes, with the line noise that the
+    frame's lines show (:func:`line_noise_scale`, at least ``off_wall_floor_px``) in place of the model's
+    ``sigma_img`` [px]: returns the models with the candidates it finds off their wall marked "off the wall"
+    (the selection's first test: a reason found later, such as "near boundary", gives way to it), and the scale
+    (1: nothing changed)."""
+    scale = line_noise_scale([c for m in models for c in m.candidates], config.off_wall_min_lines,
+                             config.off_wall_floor_px / sigma_img)
+    if scale >= 1.0:
+        return models, scale
+    out = []
+    for m in models:
+        cands = []
+        for c in m.candidates:
+            if c.reason not in (REASON_OFF_WALL, REASON_HEIGHT):
+                var_line = max(c.sigma_wall_offset**2 - c.sigma_wall_fit**2, 0.0)
+                if abs(c.wall_offset) > config.off_wall_sigma * math.sqrt(scale**2 * var_line + c.sigma_wall_fit**2):
+                    c = _replace(c, selected=False, reason=REASON_OFF_WALL)
+            cands.append(c)
+        out.append(m if all(a is b for a, b in zip(cands, m.candidates, strict=True)) else replace(m, candidates=cands))
+    return out, scale
+
+
 def _replace(c: Candidate, **kw) -> Candidate:
     """``dataclasses.replace(c, **kw)`` for the selection's decisions, without its cost (a frozen dataclass of
     ~35 fields is rebuilt field by field through ``__init__``: ~15 µs, for every candidate of every frame): a
@@ -870,6 +934,7 @@ def landmarks_on_plane(
     cov_X=None,
     border_sigma_px: float | tuple[float | None, float | None] | None = None,
     disparity_left: np.ndarray | None = None,
+    disparity_range: tuple[float, float] | None = None,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection.
 
@@ -882,7 +947,11 @@ def landmarks_on_plane(
     ``cov_X`` (3, 3): the pose covariance; with it a found boundary is checked against the map's free edge
     (:func:`boundary_disagreement`) and not used when it is farther than ``boundary_gate_sigma`` σ.
     ``border_sigma_px``: see :func:`search_boundary`. ``disparity_left``: when given, a selected candidate
-    beside something nearer than its wall (:func:`beside_nearer`) is rejected.
+    beside something nearer than its wall (:func:`beside_nearer`) is rejected. ``disparity_range``: the least and
+    the largest disparity block matching searches [px]; an edge where the wall's predicted disparity may lie
+    outside it (``search_sigma`` σ) is not searched: block matching finds nothing there, and the wall's region
+    ends where the wall leaves the range, not at its edge (a camera with f·b = 98 px·m and 64 disparities sees
+    nothing nearer than 1.5 m: a free-standing panel's end 1.2 m away was found 21 cm inside it).
     """
     if cov_X is not None:
         cov_map = world_map.accuracy_cov if world_map is not None else np.zeros((2, 2))
@@ -922,6 +991,15 @@ def landmarks_on_plane(
             not (vc[0] + 1 < w[0] and w[1] < vc[1] - 1) for w, vc in zip(windows, valid_columns, strict=True)
         ):
             continue
+        if disparity_range is not None:
+            d, sd = fit.prediction.disparity_at(e.u[0])
+            d_lo, d_hi = float(d - config.search_sigma * sd), float(d + config.search_sigma * sd)
+            if d_hi > disparity_range[1] or d_lo < disparity_range[0]:
+                rejected.append((None, f"plane {fit.plane.label!r}: the wall's disparity at its free edge {edge} may "
+                                       f"be {d_lo:.0f}–{d_hi:.0f} px, beyond the {disparity_range[0]:g}–"
+                                       f"{disparity_range[1]:g} px block matching searches (sad.min_disparity, "
+                                       "sad.num_disparities): not searched"))
+                continue
         incidence = edge_incidence(camera, fit.X, fit.plane, edge)
         if incidence > math.radians(config.max_incidence_deg):
             # the limit of the lines modelled from a boundary holds for the boundary too: its column error is

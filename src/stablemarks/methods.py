@@ -23,7 +23,7 @@ from .config import Config
 from .errors import InputError, expected
 from .estimation import JointEKF, NewLandmark, associate_frame, is_duplicate, wall_polarity
 from .geometry import StereoCamera
-from .landmarks import Candidate
+from .landmarks import REASON_OFF_WALL, Candidate
 from .maps import Map
 from .pipeline import FrameLandmarks, FrontEnd, select_landmarks
 
@@ -76,8 +76,10 @@ class Method:
         """Re-check each associated wall landmark against the frame's own model of the same line: positions
         along the wall (both pose-independent) must agree within ``sigma`` σ of their two variances. A landmark
         that does not is dropped from the filter (and the pair enters again as a new landmark from this frame's
-        model): an error made from far away or at a slant is corrected when the line is seen better. Returns
-        the associations kept and the ids dropped."""
+        model): an error made from far away or at a slant is corrected when the line is seen better. So is a
+        landmark whose line this frame finds off its wall (:data:`~stablemarks.landmarks.REASON_OFF_WALL`): an
+        edge of something standing in front of the wall, let in by a frame whose test it passed by chance, is
+        tested again in every frame that sees it. Returns the associations kept and the ids dropped."""
         if model is None:
             return assoc, []
         by_pair = {c.pair: c for c in model.candidates}
@@ -90,6 +92,9 @@ class Method:
             lm = ekf.landmark(i)
             if lm.kind != "wall" or lm.plane_id != c.plane_id:
                 keep.append((i, j))
+                continue
+            if c.reason == REASON_OFF_WALL:
+                dropped.append(i)
                 continue
             plane = ekf.landmark_plane(i)
             gap = float(plane.along(c.P) - plane.along(lm.position))

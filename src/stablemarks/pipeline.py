@@ -33,7 +33,7 @@ from numba import njit
 from .config import Config
 from .errors import ImageError, expected
 from .geometry import StereoCamera
-from .landmarks import Candidate, PlaneLandmarks, landmarks_on_plane
+from .landmarks import Candidate, PlaneLandmarks, landmarks_on_plane, off_wall_by_lines
 from .maps import Map
 from .planes import FailedFit, PlaneFit, PlanePrediction, fit_plane, predict_planes
 from .vision.area_stereo import (
@@ -722,12 +722,16 @@ def select_landmarks(
                                    config.landmarks, config.planes, float(config.sad.block_size),
                                    columns, world_map, cov_X=cov_X,
                                    border_sigma_px=(config.noise.boundary_px, config.noise.free_boundary_px),
-                                   disparity_left=front.disparity.left)
+                                   disparity_left=front.disparity.left,
+                                   disparity_range=(float(config.sad.min_disparity),
+                                                    float(config.sad.min_disparity + config.sad.num_disparities - 1)))
         warnings += [why for _, why in model.rejected_boundaries]
         t_model += time.perf_counter() - tb
         if fit.plane.free_edges and not model.boundaries:
             warnings.append(f"plane {fit.plane.label!r}: no free edge found in view; its features are not modelled")
         models.append(model)
+    # the off-wall test once more with the line noise the frame's own lines show, when below the model's
+    models, _ = off_wall_by_lines(models, config.landmarks, camera.sigma_img)
     cands = [c for m in models for c in m.candidates]
     timings = {"disparity": t_disp, "planes": t_fit, "landmarks": t_model, "total": time.perf_counter() - t0}
     return FrameLandmarks(front, X, cov_X, preds, fits, models, cands, warnings, timings)

@@ -486,9 +486,49 @@ def test_edge_depth_step_equals_the_reference(scenario_frames):
 
 
 # ------------------------------------------------------------------ the boundary search's row ends, read in place
+@njit(cache=False)
+def row_ends_reference(region, c0, c1, outward, max_hole):
+    """The former ``stablemarks.landmarks._row_ends``, the walk of :func:`_boundary_columns` on the window of
+    columns ``c0…c1`` of ``region`` (H, W), as :func:`~stablemarks.landmarks._block_row_ends` describes it with
+    the region its own block."""
+    H = region.shape[0]
+    n = c1 - c0 + 1
+    first = c1 if outward < 0 else c0  # the image column of position j from the inner side: first + step·j
+    step = -1 if outward < 0 else 1
+    rows = np.empty(H, dtype=np.int64)
+    cols = np.empty(H, dtype=np.float64)
+    k = 0
+    for i in range(H):
+        row = region[i]
+        start = n
+        for j in range(n):
+            if row[first + step * j]:
+                start = j
+                break
+        last = -1  # the run's last pixel, once a hole not crossed ends it
+        j = start + 1
+        while j < n:
+            if row[first + step * j]:
+                j += 1
+                continue
+            q = j + 1  # the next region pixel after the hole that starts at j
+            while q < n and not row[first + step * q]:
+                q += 1
+            if q < n and q - j <= max_hole:
+                j = q
+            else:
+                last = j - 1
+                break
+        if last >= 0:
+            rows[k] = i
+            cols[k] = float(first + step * last)
+            k += 1
+    return rows[:k].copy(), cols[:k].copy()
+
+
 def block_boundary_columns_reference(block, v0, u0, W, lo, hi, outward, max_hole=2):
     """The former :func:`~stablemarks.landmarks._block_boundary_columns`: the window's columns copied out of the
-    block (False off it), then :func:`~stablemarks.landmarks._row_ends`."""
+    block (False off it), then the former ``_row_ends`` (:func:`row_ends_reference`)."""
     import math
 
     c0 = math.floor(min(max(lo, 0), W - 1))
@@ -500,7 +540,7 @@ def block_boundary_columns_reference(block, v0, u0, W, lo, hi, outward, max_hole
     a, b = max(c0, u0), min(c1, u0 + w - 1)
     if b >= a:
         window[:, a - c0 : b - c0 + 1] = block[:, a - u0 : b - u0 + 1]
-    rows, cols = L._row_ends(window, 0, c1 - c0, int(outward), int(max_hole))
+    rows, cols = row_ends_reference(window, 0, c1 - c0, int(outward), int(max_hole))
     return rows + v0, cols + c0
 
 

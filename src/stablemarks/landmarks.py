@@ -298,14 +298,10 @@ def _boundary_columns(region: np.ndarray, lo: float, hi: float, outward: int, ma
     ``max_hole`` px closed: pixels the disparity checks left out) to its end: beyond a gap the region may go
     on over a wall in line with this one, which is not this wall's edge. Returns rows and their boundary
     columns; rows whose region does not reach into the window are left out, and so are rows whose run goes
-    through it (it ends beyond the window). One pass over each row of the window (:func:`_row_ends`).
+    through it (it ends beyond the window). One pass over each row of the window (:func:`_block_row_ends`, the
+    region being its own block).
     """
-    W = region.shape[1]
-    c0 = math.floor(min(max(lo, 0), W - 1))
-    c1 = math.ceil(min(max(hi, 0), W - 1))
-    if c1 < c0:
-        return np.zeros(0, int), np.zeros(0)
-    return _row_ends(np.ascontiguousarray(region, dtype=np.bool_), c0, c1, int(outward), int(max_hole))
+    return _block_boundary_columns(region, 0, 0, region.shape[1], lo, hi, outward, max_hole)
 
 
 def _block_boundary_columns(block: np.ndarray, v0: int, u0: int, W: int, lo: float, hi: float, outward: int,
@@ -324,9 +320,12 @@ def _block_boundary_columns(block: np.ndarray, v0: int, u0: int, W: int, lo: flo
 
 @njit(cache=True)
 def _block_row_ends(block, v0, u0, c0, c1, outward, max_hole):  # pragma: no cover - numba
-    """:func:`_row_ends` of the window of columns ``c0…c1`` of a region that is ``block`` (h, w) at rows ``v0…``,
-    columns ``u0…`` and False elsewhere, read in place (no copy of the window): the same walk, pixel for pixel;
-    rows and columns in image coordinates."""
+    """Per row of a region that is ``block`` (h, w) at rows ``v0…``, columns ``u0…`` and False elsewhere, read in
+    place, where it ends in the window of columns ``c0…c1``: walking from the window's inner side (``c1`` when
+    ``outward`` < 0, else ``c0``), the first region pixel starts the run; a hole of at most ``max_hole`` px
+    followed by a region pixel is crossed; the run ends before any other hole, also one that reaches the window's
+    outer side. Rows with no region pixel in the window, or whose run reaches the outer side, have no end.
+    Returns (rows, columns as float) in image coordinates."""
     h, w = block.shape
     n = c1 - c0 + 1
     first = c1 if outward < 0 else c0  # the image column of position j from the inner side: first + step·j
@@ -361,48 +360,6 @@ def _block_row_ends(block, v0, u0, c0, c1, outward, max_hole):  # pragma: no cov
                 break
         if last >= 0:
             rows[k] = v0 + i
-            cols[k] = float(first + step * last)
-            k += 1
-    return rows[:k].copy(), cols[:k].copy()
-
-
-@njit(cache=True)
-def _row_ends(region, c0, c1, outward, max_hole):  # pragma: no cover - numba
-    """:func:`_boundary_columns` on the window of columns ``c0…c1`` of ``region`` (H, W): per row, walking
-    from the window's inner side (``c1`` when ``outward`` < 0, else ``c0``), the first region pixel starts the
-    run; a hole of at most ``max_hole`` px followed by a region pixel is crossed; the run ends before any
-    other hole, also one that reaches the window's outer side. Rows with no region pixel in the window, or
-    whose run reaches the outer side, have no end. Returns (rows, columns as float)."""
-    H = region.shape[0]
-    n = c1 - c0 + 1
-    first = c1 if outward < 0 else c0  # the image column of position j from the inner side: first + step·j
-    step = -1 if outward < 0 else 1
-    rows = np.empty(H, dtype=np.int64)
-    cols = np.empty(H, dtype=np.float64)
-    k = 0
-    for i in range(H):
-        row = region[i]
-        start = n
-        for j in range(n):
-            if row[first + step * j]:
-                start = j
-                break
-        last = -1  # the run's last pixel, once a hole not crossed ends it
-        j = start + 1
-        while j < n:
-            if row[first + step * j]:
-                j += 1
-                continue
-            q = j + 1  # the next region pixel after the hole that starts at j
-            while q < n and not row[first + step * q]:
-                q += 1
-            if q < n and q - j <= max_hole:
-                j = q
-            else:
-                last = j - 1
-                break
-        if last >= 0:
-            rows[k] = i
             cols[k] = float(first + step * last)
             k += 1
     return rows[:k].copy(), cols[:k].copy()

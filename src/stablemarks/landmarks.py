@@ -278,6 +278,11 @@ class Candidate:
         return float(np.hypot(self.sigma_b, self.sigma_f))
 
     @property
+    def sigma_wall_line(self) -> float:
+        """The lines' part of :attr:`sigma_wall_offset` [m]: without the fit's (``sigma_wall_fit``)."""
+        return math.sqrt(max(self.sigma_wall_offset**2 - self.sigma_wall_fit**2, 0.0))
+
+    @property
     def sigma_relative(self) -> float:
         """σ of ``s`` from the joint error model (``shared_jacobian``; :attr:`sigma_s` without it) [m]."""
         if self.shared_jacobian is None:
@@ -803,9 +808,9 @@ def line_noise_scale(candidates: list[Candidate], min_lines: int, floor: float =
         return 1.0
     z = []
     for c in candidates:
-        var_line = c.sigma_wall_offset**2 - c.sigma_wall_fit**2
-        if np.isfinite(c.wall_offset) and np.isfinite(var_line) and var_line > 0:
-            z.append(abs(c.wall_offset) / math.sqrt(var_line))
+        sigma = c.sigma_wall_line
+        if np.isfinite(c.wall_offset) and np.isfinite(sigma) and sigma > 0:
+            z.append(abs(c.wall_offset) / sigma)
     if len(z) < min_lines:
         return 1.0
     return min(1.0, max(floor, 1.4826 * float(np.median(z))))
@@ -826,10 +831,9 @@ def off_wall_by_lines(models: list[PlaneLandmarks], config: LandmarkConfig, sigm
     for m in models:
         cands = []
         for c in m.candidates:
-            if c.reason not in (REASON_OFF_WALL, REASON_HEIGHT):
-                var_line = max(c.sigma_wall_offset**2 - c.sigma_wall_fit**2, 0.0)
-                if abs(c.wall_offset) > config.off_wall_sigma * math.sqrt(scale**2 * var_line + c.sigma_wall_fit**2):
-                    c = _replace(c, selected=False, reason=REASON_OFF_WALL)
+            sigma = math.hypot(scale * c.sigma_wall_line, c.sigma_wall_fit)
+            if c.reason not in (REASON_OFF_WALL, REASON_HEIGHT) and abs(c.wall_offset) > config.off_wall_sigma * sigma:
+                c = _replace(c, selected=False, reason=REASON_OFF_WALL)
             cands.append(c)
         out.append(m if all(a is b for a, b in zip(cands, m.candidates, strict=True)) else replace(m, candidates=cands))
     return out, scale

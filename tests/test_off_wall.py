@@ -304,3 +304,61 @@ def test_an_edge_nearer_than_block_matching_searches_is_not_searched():
     m, _ = run(96)
     assert "p1" in m.searched and len(m.boundaries) == 1
     assert np.hypot(*(m.boundaries[0].P - np.array([0.0, 0.85]))) < 0.03, m.boundaries[0].P
+
+
+def _doorway(heading_error_deg, east=True):
+    """A wall ending at a door jamb at (0, 4) (its free edge p2), a dark door-frame strip 6 cm wide 4 cm inside the
+    jamb, a lintel over the 1.2 m doorway in the wall's plane (not in the map), a 0.3 m stretch of wall beyond the
+    door in line with this one (when ``east``), a hall wall 2.5 m behind. Seen from 4 m with the heading off by
+    ``heading_error_deg`` and believed to be known to 5°."""
+    tex = {"kind": "noise", "base": 110, "contrast": 14, "scale": 0.03}
+    walls = [{"id": "west", "p1": [-3.0, 4.0], "p2": [0.0, 4.0], "z": [0.0, 2.8], "free_edges": ["p2"], "texture": tex},
+             {"id": "frame", "p1": [-0.10, 3.995], "p2": [-0.04, 3.995], "z": [0.0, 2.05], "in_map": False,
+              "texture": {"kind": "plain", "base": 25}},
+             {"id": "lintel", "p1": [0.0, 4.0], "p2": [1.2, 4.0], "z": [2.05, 2.8], "in_map": False, "texture": tex},
+             {"id": "hall", "p1": [-4.0, 6.5], "p2": [5.0, 6.5], "z": [0.0, 2.8], "reference": False,
+              "texture": {"kind": "noise", "base": 170, "contrast": 10, "scale": 0.05}}]
+    if east:
+        walls.append({"id": "east", "p1": [1.2, 4.0], "p2": [1.5, 4.0], "z": [0.0, 2.8], "free_edges": ["p1", "p2"],
+                      "texture": tex})
+    sc = parse_scenario({"name": "door", "camera": CAMERA, "walls": walls,
+                         "robot": {"start": {"x": 0.3, "y": 0.0, "theta_deg": 90}}}, "test")
+    X = np.array([0.3, 0.0, np.pi / 2])
+    f = render_stereo(sc, X, 0.0, np.random.default_rng(3))
+    X_est = X + np.array([0.0, 0.0, np.radians(heading_error_deg)])
+    cov = np.diag([0.03, 0.03, np.radians(5.0)]) ** 2
+    return sc, X_est, process_frame(f.left, f.right, sc.camera, sc.map, X_est, cov, Config())
+
+
+def test_the_gap_to_a_wall_beyond_a_doorway_is_measured_past_the_window():
+    """The wall beyond a 1.2 m doorway seen at 4 m is ~150 px from the jamb in the image: found even where it lies
+    beyond the jamb's search window (the pose's error moves both alike); no other wall: infinite."""
+    from stablemarks.landmarks import other_wall_gap
+
+    for east in (True, False):
+        sc, X, res = _doorway(0.0, east)
+        (pm,) = [p for p in res.planes if p.fit.plane.id == "west"]
+        gap = other_wall_gap(sc.camera, pm.fit, sc.map, "p2", LandmarkConfig().search_sigma)
+        if east:
+            assert gap == pytest.approx(500.0 * 1.2 / 4.0, rel=0.1)
+            assert gap > pm.fit.prediction.edges["p2"].window(0, LandmarkConfig().search_sigma)[1] \
+                - pm.fit.prediction.edges["p2"].u[0]  # beyond the window's outer half
+        else:
+            assert gap == np.inf
+
+
+@pytest.mark.parametrize("heading_error_deg", [-7.0, 0.0, 7.0])
+def test_a_door_jamb_is_found_at_the_jamb_not_across_the_door(heading_error_deg):
+    """The region is followed across the door frame's textureless strip (4 cm inside the jamb), never across
+    the doorway to the wall beyond it, whichever way the heading errs (7°: the wall beyond the door predicted
+    outside the jamb's search window lies 60 px inside it)."""
+    sc, X, res = _doorway(heading_error_deg)
+    (pm,) = [p for p in res.planes if p.fit.plane.id == "west"]
+    assert len(pm.boundaries) == 1, pm.rejected_boundaries
+    b = pm.boundaries[0]
+    # the jamb's column from the true pose, against the boundary's
+    from stablemarks.geometry import StereoCamera
+
+    cam = StereoCamera(width=640, height=480, f=500.0, baseline=0.12, mount_height=1.0)
+    u_true = float(cam.project_columns(np.array([0.3, 0.0, np.pi / 2]), np.array([0.0, 4.0]))[0])
+    assert abs(b.u[0] - u_true) < 3.0, (b.u, u_true, b.snapped)

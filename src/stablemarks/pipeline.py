@@ -731,7 +731,9 @@ def select_landmarks(
             warnings.append(f"plane {fit.plane.label!r}: no free edge found in view; its features are not modelled")
         models.append(model)
     # the off-wall test once more with the line noise the frame's own lines show, when below the model's
+    before = [len(m.rejected_boundaries) for m in models]
     models, _ = off_wall_by_lines(models, config.landmarks, camera.sigma_img)
+    warnings += [why for m, n in zip(models, before, strict=True) for _, why in m.rejected_boundaries[n:]]
     cands = [c for m in models for c in m.candidates]
     timings = {"disparity": t_disp, "planes": t_fit, "landmarks": t_model, "total": time.perf_counter() - t0}
     return FrameLandmarks(front, X, cov_X, preds, fits, models, cands, warnings, timings)

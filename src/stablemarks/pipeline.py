@@ -730,7 +730,8 @@ def select_landmarks(
         if fit.plane.free_edges and not model.boundaries:
             warnings.append(f"plane {fit.plane.label!r}: no free edge found in view; its features are not modelled")
         models.append(model)
-    # the off-wall test once more with the line noise the frame's own lines show, when below the model's
+    # walls whose own lines scatter about their fit give nothing; then the off-wall test once more with the line
+    # noise the frame's own lines show, when below the model's (landmarks.off_wall_by_lines)
     before = [len(m.rejected_boundaries) for m in models]
     models, _ = off_wall_by_lines(models, config.landmarks, camera.sigma_img)
     warnings += [why for m, n in zip(models, before, strict=True) for _, why in m.rejected_boundaries[n:]]

@@ -14,6 +14,8 @@ from stablemarks import planes as P
 from stablemarks.config import Config
 from stablemarks.landmarks import relative_error_model
 
+from .helpers import assert_same_candidate, boundary_model_inputs
+
 
 # ------------------------------------------------------------------ the plane fit's reweighting steps
 def reweight_numpy(s, o, sigma_o, w_all, inl, a, b, s0, outlier_sigma):
@@ -358,19 +360,6 @@ def model_features_reference(
     return out
 
 
-def _same_candidate(a, b) -> None:
-    assert a.__dict__.keys() == b.__dict__.keys()
-    for key, x in a.__dict__.items():
-        y = b.__dict__[key]
-        assert type(x) is type(y), key
-        if isinstance(x, np.ndarray):
-            assert np.array_equal(x, y, equal_nan=True), key
-        elif isinstance(x, float):
-            assert x == y or (np.isnan(x) and np.isnan(y)), key
-        else:
-            assert x == y, key
-
-
 def test_model_features_equals_the_reference(scenario_frames, scenario_models):
     """Every plane's candidates from every boundary found, with and without contrasts, both boundary-σ variants:
     the same candidates, field by field (values and types)."""
@@ -378,19 +367,13 @@ def test_model_features_equals_the_reference(scenario_frames, scenario_models):
 
     config = Config()
     n = 0
-    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
-        camera = config.camera(frame[4])
-        pairs = front.kept_pairs
-        step = front.left_segments.contrast[pairs.left_index] / 4.0
-        for plane in model.planes:
-            idx = np.flatnonzero(plane.members)
-            for b in plane.boundaries:
-                for contrast in (step, None):
-                    for lc in (config.landmarks, dc_replace(config.landmarks, filter_boundary_sigma="measured")):
-                        got = L.model_features(camera, plane.fit, b, pairs, idx, contrast, lc)
-                        want = model_features_reference(camera, plane.fit, b, pairs, idx, contrast, lc)
-                        assert len(got) == len(want)
-                        for x, y in zip(got, want, strict=True):
-                            _same_candidate(x, y)
-                        n += len(got)
+    for camera, plane, b, pairs, idx, step in boundary_model_inputs(scenario_frames, scenario_models, config):
+        for contrast in (step, None):
+            for lc in (config.landmarks, dc_replace(config.landmarks, filter_boundary_sigma="measured")):
+                got = L.model_features(camera, plane.fit, b, pairs, idx, contrast, lc)
+                want = model_features_reference(camera, plane.fit, b, pairs, idx, contrast, lc)
+                assert len(got) == len(want)
+                for x, y in zip(got, want, strict=True):
+                    assert_same_candidate(x, y)
+                n += len(got)
     assert n > 50

@@ -19,6 +19,7 @@ from stablemarks.geometry import StereoCamera
 from stablemarks.vision import area_stereo as A
 
 from .conftest import COV_PRIOR
+from .helpers import assert_same_candidate, boundary_model_inputs
 
 
 # ------------------------------------------------------------------ the SAD kernel's choice of the dense plan
@@ -300,39 +301,22 @@ def model_features_reference(*args, **kwargs):
         L._new_candidate = fast
 
 
-def _same_candidate(a, b) -> None:
-    assert type(a) is type(b) is L.Candidate
-    assert list(a.__dict__) == list(b.__dict__)
-    for name, x in a.__dict__.items():
-        y = b.__dict__[name]
-        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
-            assert np.array_equal(x, y, equal_nan=True), name
-        else:
-            assert type(x) is type(y) and (x == y or (x != x and y != y)), name
-
-
 def test_model_features_equal_the_reference(scenario_frames, scenario_models):
     """The candidates of every plane of every scenario frame from each of its boundaries: the same fields, values and
     order, as made by the dataclass; and the selection and the frozen dataclass's behaviour on them."""
     config = Config()
     n = 0
-    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
-        camera = config.camera(frame[4])
-        pairs = front.kept_pairs
-        step = front.left_segments.contrast[pairs.left_index] / 4.0
-        for plane in model.planes:
-            for b in plane.boundaries:
-                idx = np.flatnonzero(plane.members)
-                got = L.model_features(camera, plane.fit, b, pairs, idx, step, config.landmarks)
-                want = model_features_reference(camera, plane.fit, b, pairs, idx, step, config.landmarks)
-                assert len(got) == len(want)
-                for a, c in zip(got, want, strict=True):
-                    _same_candidate(a, c)
-                    assert repr(a) == repr(c)
-                for a, c in zip(L.select(got, plane.boundaries, config.landmarks),
-                                L.select(want, plane.boundaries, config.landmarks), strict=True):
-                    _same_candidate(a, c)
-                n += len(got)
+    for camera, plane, b, pairs, idx, step in boundary_model_inputs(scenario_frames, scenario_models, config):
+        got = L.model_features(camera, plane.fit, b, pairs, idx, step, config.landmarks)
+        want = model_features_reference(camera, plane.fit, b, pairs, idx, step, config.landmarks)
+        assert len(got) == len(want)
+        for a, c in zip(got, want, strict=True):
+            assert_same_candidate(a, c)
+            assert repr(a) == repr(c)
+        for a, c in zip(L.select(got, plane.boundaries, config.landmarks),
+                        L.select(want, plane.boundaries, config.landmarks), strict=True):
+            assert_same_candidate(a, c)
+        n += len(got)
     assert n > 20
     c = got[0]
     with pytest.raises(FrozenInstanceError):
@@ -577,23 +561,12 @@ def test_block_boundary_columns_equal_the_reference(scenario_models):
 # ------------------------------------------------------------------ plane members counted in one pass
 def plane_members_reference(fit, pairs, left_segments, config):
     """The former :func:`~stablemarks.planes.plane_members`: the agreeing pairs' pixels gathered by ``np.repeat``,
-    their hits counted by ``np.bincount``."""
-    n = len(pairs)
-    out = np.zeros(n, dtype=bool)
-    if n == 0:
-        return out
-    u0, u1 = fit.prediction.window
-    d_pred, s_pred = fit.prediction.disparity_at(pairs.u_left)
-    inside = (pairs.u_left >= u0 - 0.5) & (pairs.u_left <= u1 + 0.5)
-    agree = np.flatnonzero(inside & (np.abs(pairs.disparity - d_pred) <= fit.prediction.gate * s_pred))
+    their hits counted by ``np.bincount`` (the gate and the dilated region are the production's, unchanged)."""
+    out = np.zeros(len(pairs), dtype=bool)
+    agree, region, v0, c0 = P.member_candidates(fit, pairs, config)
     if len(agree) == 0:
         return out
     H, W = fit.region.shape
-    px = max(0, config.member_dilate_px)
-    v0, v1, _ = fit.box[0].indices(H)
-    c0, c1, _ = fit.box[1].indices(W)
-    v0, v1, c0, c1 = max(0, v0 - px), min(H, v1 + px), max(0, c0 - px), min(W, c1 + px)
-    region = P.dilate(fit.region[v0:v1, c0:c1], px)
     seg = np.asarray(pairs.left_index)[agree].astype(np.int64)
     starts = left_segments.pixel_offsets[seg]
     counts = left_segments.pixel_offsets[seg + 1] - starts

@@ -461,6 +461,12 @@ def _right_band(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):
     return out
 
 
+def boundary_window(config: LandmarkConfig, window_px: float) -> float:
+    """The SAD window width [px] the boundary search allows for: ``landmarks.boundary_window_px`` when set, else
+    ``window_px`` (the block matcher's ``sad.block_size``)."""
+    return config.boundary_window_px if config.boundary_window_px is not None else window_px
+
+
 def search_boundary(
     camera: StereoCamera,
     fit: PlaneFit,
@@ -488,7 +494,7 @@ def search_boundary(
     window where the map has no other wall beyond the edge, so that a textureless strip just inside the edge,
     a joint or a door frame, does not end the region early).
     """
-    w = config.boundary_window_px if config.boundary_window_px is not None else window_px
+    w = boundary_window(config, window_px)
     pred = fit.prediction
     plane = fit.plane
     e = pred.edges[edge]
@@ -979,7 +985,7 @@ def landmarks_on_plane(
     idx = np.flatnonzero(members)
     members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
     boundaries, rejected, searched = [], [], []
-    w_sad = config.boundary_window_px if config.boundary_window_px is not None else window_px
+    w_sad = boundary_window(config, window_px)
     for edge in fit.plane.free_edges:
         e = fit.prediction.edges[edge]
         if not np.all(np.isfinite(e.u)):  # the edge is behind the camera

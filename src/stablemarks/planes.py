@@ -612,29 +612,39 @@ def plane_members(fit: PlaneFit, pairs, left_segments, config: PlaneConfig = Pla
     image count at the nearest border pixel), and its own disparity agrees with the plane's predicted
     disparity at its column within the 3σ gate.
     """
-    n = len(pairs)
-    out = np.zeros(n, dtype=bool)
-    if n == 0:
+    out = np.zeros(len(pairs), dtype=bool)
+    agree, region, v0, c0 = member_candidates(fit, pairs, config)
+    if len(agree) == 0:
         return out
+    # every pixel of the agreeing pairs' left segments, segment after segment
+    seg = np.asarray(pairs.left_index)[agree].astype(np.int64)
+    H, W = fit.region.shape
+    frac = _member_fractions(seg, np.asarray(left_segments.pixel_offsets, np.int64), left_segments.pixel_uv,
+                             np.ascontiguousarray(region), c0, v0, H, W)
+    out[agree] = frac >= config.member_min_fraction
+    return out
+
+
+def member_candidates(fit: PlaneFit, pairs, config: PlaneConfig = PlaneConfig()
+                      ) -> tuple[np.ndarray, np.ndarray | None, int, int]:
+    """:func:`plane_members`' first steps: the indices of the pairs inside the plane's window whose disparity agrees
+    with the prediction (3σ gate), and the region dilated by ``member_dilate_px`` within the fit's box grown by the
+    dilation (it is empty elsewhere), with the box's first row and column. No pair agrees: ``(empty, None, 0, 0)``."""
+    none = (np.zeros(0, dtype=np.int64), None, 0, 0)
+    if len(pairs) == 0:
+        return none
     u0, u1 = fit.prediction.window
     d_pred, s_pred = fit.prediction.disparity_at(pairs.u_left)
     inside = (pairs.u_left >= u0 - 0.5) & (pairs.u_left <= u1 + 0.5)
     agree = np.flatnonzero(inside & (np.abs(pairs.disparity - d_pred) <= fit.prediction.gate * s_pred))
     if len(agree) == 0:
-        return out
-    # the dilated region within the fit's box grown by the dilation (it is empty elsewhere)
+        return none
     H, W = fit.region.shape
     px = max(0, config.member_dilate_px)
     v0, v1, _ = fit.box[0].indices(H)
     c0, c1, _ = fit.box[1].indices(W)
     v0, v1, c0, c1 = max(0, v0 - px), min(H, v1 + px), max(0, c0 - px), min(W, c1 + px)
-    region = dilate(fit.region[v0:v1, c0:c1], px)
-    # every pixel of the agreeing pairs' left segments, segment after segment
-    seg = np.asarray(pairs.left_index)[agree].astype(np.int64)
-    frac = _member_fractions(seg, np.asarray(left_segments.pixel_offsets, np.int64), left_segments.pixel_uv,
-                             np.ascontiguousarray(region), c0, v0, H, W)
-    out[agree] = frac >= config.member_min_fraction
-    return out
+    return agree, dilate(fit.region[v0:v1, c0:c1], px), v0, c0
 
 
 @njit(cache=True)

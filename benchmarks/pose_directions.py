@@ -14,9 +14,9 @@ can be right about the weak direction and wrong about the strong ones, which the
 import argparse
 
 import numpy as np
-import yaml
 
-from stablemarks.config import Config
+from stablemarks.config import load_config
+from stablemarks.errors import ConfigError
 from stablemarks.evaluation import DEFAULT_COV0, start_belief, trial_seeds
 from stablemarks.localizer import Localizer
 from stablemarks.sim.run import simulate_run
@@ -31,10 +31,10 @@ def main() -> None:
     ap.add_argument("--config", help="configuration YAML")
     ap.add_argument("--frames", type=int, help="first N frames only")
     args = ap.parse_args()
-    config = Config()
-    if args.config:
-        with open(args.config) as fh:
-            config = config.with_overrides(yaml.safe_load(fh) or {})
+    try:
+        config = load_config(args.config)
+    except ConfigError as e:
+        ap.error(str(e))
     sc = load_scenario(args.scenario)
     run = simulate_run(sc, trial_seeds(sc.seed, args.trial + 1)[args.trial])
     source = SimulatedSource(run, frames=args.frames)

@@ -94,14 +94,15 @@ class NoiseConfig:
     the default yet (see ``ekf.edge_updates``); 2 px covers those snaps when landmarks are modelled from them.
     0.5 px was tried (``stablemarks eval``, 8 trials, December 2026): frames with the pose NEES inside its 95 %
     bounds 0.10 → 0.76 on lab, 0.96 → 0.92 room, 0.44 → 0.48 corridor, 0.80 → 0.60 office, 0.64 → 0.97 hall, loop's
-    NEES 0.79; but selection precision fell on hall (0.99 → 0.93) and on the storeroom (0.75 → 0.69), whose landmark
-    NEES rose 2.3 → 9.3 (on the hall, a line a few px inside a screen's edge was no longer kept away from the
-    boundary by its σ; the storeroom's losses were not examined): not adopted. With the line noise, this σ and the
-    wall's shared disparity error at their measured values (``sigma_img`` 0.08, ``boundary_px`` 0.1,
-    ``planes.disparity_bias_px`` 0.04) the ATE fell to 0.5–0.9 of today's on the five built-in scenarios, but lab
-    and room were too cautious (pose NEES 0.8–1.3). With these and with the defaults alike, the two pose directions
-    the walls observe well are held 4–10 times less certain (in variance) than their errors, while the direction
-    they hardly observe (along the wall against the heading) is not (``benchmarks/pose_directions.py``).
+    NEES 0.79 (the defaults not rerun there); but selection precision fell on hall (0.99 → 0.93) and on the
+    storeroom (0.75 → 0.69), whose landmark NEES rose 2.3 → 9.3 (on the hall, a line a few px inside a screen's edge
+    was no longer kept away from the boundary by its σ; the storeroom's losses were not examined): not adopted. With
+    the line noise, this σ and the wall's shared disparity error at their measured values (``sigma_img`` 0.08,
+    ``boundary_px`` 0.1, ``planes.disparity_bias_px`` 0.04) the ATE fell to 0.5–0.9 of the defaults' on the five
+    built-in scenarios, but lab and room were too cautious (pose NEES 0.8–1.3). With these and with the defaults
+    alike, the two pose directions the walls observe well are held 4–10 times less certain (in variance) than their
+    errors, while the direction they hardly observe (along the wall against the heading) is not
+    (``benchmarks/pose_directions.py``).
     Earlier measurements: 0.75 px was tried on all six scenarios: pose NEES closer to its bounds on lab
     (1.3 → 1.5) and room (2.4 → 2.8), but one office trial's recovery after a blind stretch then failed (ATE
     0.22 m)."""

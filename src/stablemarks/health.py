@@ -41,6 +41,7 @@ condition's name first):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from .errors import ConfigError, expected
@@ -69,6 +70,13 @@ class HealthConfig:
     """Frames in a row with no landmark found and the walls fitted away from the pose before the walls relocalize
     it (``odometry_disagrees``): one such frame also happens on clean runs (the office, a turn: a wall fit 2 cm
     off, and a pattern of three landmarks fitted the pose relocalized 7 cm away)."""
+    relocalize_radius: float = 2.0
+    """How far [m] from the predicted pose a relocalization from the landmarks on the frame's lines looks
+    (``Localizer._relocalize``): the largest slip or kidnap it recovers from."""
+    relocalize_tol_px: float = 10.0
+    """A landmark is on one of the frame's lines, for a pose made from two lines, when both its columns are within
+    this [px]: two triangulated lines 3 m away are each a few cm off in depth, which moves the other landmarks'
+    predictions by several pixels (the pose is then refitted to all of them and checked with 3 σ_img)."""
     few_found_p: float = 0.01
     """A pattern of fewer than ``min_pattern`` landmarks is not used when finding so few of the landmarks predicted
     in view is less likely than this, given how often the run has found the landmarks in its view (binomial).
@@ -93,6 +101,10 @@ class HealthConfig:
         v = self.few_found_p
         if isinstance(v, bool) or not isinstance(v, int | float) or not 0 <= v < 1:
             raise ConfigError(expected("a probability in [0, 1)", v, where="health.few_found_p"))
+        for name in ("relocalize_radius", "relocalize_tol_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not (math.isfinite(v) and v > 0):
+                raise ConfigError(expected("a positive number", v, where=f"health.{name}"))
         for name in ("max_inflation", "search_inflation", "drift_sigma"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 1:
@@ -108,6 +120,9 @@ MESSAGES = {
                     "is inconsistent or diverging",
     "odometry_disagrees": "odometry_disagrees: the landmarks on a wall all pull the same way, incompatible with the "
                           "odometry (a wheel slip or a kidnap?): the pose covariance was widened ×{factor:.3g}",
+    "odometry_disagrees_reinitialised": "odometry_disagrees: the landmarks in view were found together far from "
+                                        "where the odometry puts them (a wheel slip or a kidnap?): the pose was "
+                                        "re-initialised from the landmarks on the frame's lines",
     "blind": "blind: no landmark observed for {n} frames",
     "heading_drift": "heading_drift: the images turned the heading {drift:+.1f}° from the odometry's over {w} frames "
                      "({z:.1f} σ): the head's pan may be wrong or changing unrecorded (a bag's pan comes from "
@@ -130,13 +145,15 @@ class HealthMonitor:
 
     def update(self, *, edges_missing: bool, nis_high: bool, disagree: bool, observed: bool, has_landmarks: bool,
                inflation: float = 1.0, edges_found: bool | None = None,
-               drift: tuple[float, float] | None = None) -> list[str]:
+               drift: tuple[float, float] | None = None, reinitialised: bool = False) -> list[str]:
         """Advance the counters by one frame; returns the sentences of the conditions that hold now.
 
         ``edges_found``: whether the frame found its walls where the map puts them, which is what clears
         ``edges_not_found`` (default: not ``edges_missing``; a frame can be neither, e.g. one wall turned).
         ``drift``: ``(turn [deg], z)`` when the images turned the heading from the odometry's beyond
-        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on)."""
+        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on). ``reinitialised``: the pose was
+        re-initialised from the landmarks in this frame rather than its covariance widened (the sentence of
+        ``odometry_disagrees`` says so)."""
         c = self.config
         found = _found(edges_missing, edges_found)
         if drift is not None and self.drift is None:
@@ -154,7 +171,9 @@ class HealthMonitor:
         if self.edges_latched:
             self.runs["edges_not_found"] = max(self.runs["edges_not_found"], c.edges_frames)
         turn, z = self.drift if self.drift is not None else (0.0, 0.0)
-        return [MESSAGES[k].format(n=self.runs[k], factor=inflation, drift=turn, z=z, w=c.drift_frames)
+        def message(k):
+            return MESSAGES[f"{k}_reinitialised" if reinitialised and k == "odometry_disagrees" else k]
+        return [message(k).format(n=self.runs[k], factor=inflation, drift=turn, z=z, w=c.drift_frames)
                 for k in CONDITIONS if self.holds(k)]
 
     def suspect_edges(self, edges_missing: bool, edges_found: bool | None = None) -> bool:

@@ -35,7 +35,8 @@ from .config import Config
 from .errors import InputError, expected
 from .estimation import JointEKF, LandmarkEstimate, motion
 from .estimation.association import lone_gate_px
-from .geometry import SE2, StereoCamera
+from .estimation.relocalize import pose_from_lines
+from .geometry import SE2, StereoCamera, wrap_angle
 from .health import HealthMonitor
 from .landmarks import SLOPE_GATE_CHI2, common_turn, fit_disagreements, seen_wall_jacobian
 from .maps import Map
@@ -45,6 +46,8 @@ from .viewing import choose_pan
 
 DEFAULT_START_COV = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
 """Covariance of the start pose when none is given: σ = 5 cm, 5 cm, 1° over ``(x, y, theta)``."""
+POSE_GATE_CHI2 = float(chdtri(3, 0.001))
+"""99.9 % bound of a pose difference's Mahalanobis² (3 dof): a pose the frame's lines give beyond it is elsewhere."""
 FOUND_PRIOR = (8.5, 1.5)
 """Pseudo-counts (found, missed) of the rate at which a landmark predicted in view is found, before the run has
 found any (Beta prior, weight of ten landmarks): 85 %, as measured on clean runs of loop, office and hall."""
@@ -387,16 +390,44 @@ class Localizer:
             return None  # the walls are where the pose puts them: not a kidnap
         return nu, H, R
 
-    def _relocalize(self, walls, front: FrontEnd, cam_k: StereoCamera, pan: float):
-        """Relocalize from the walls fitted in this frame (:meth:`_walls_offsets`), when no landmark was found
-        where the pose puts them in ``health.relocalize_frames`` frames in a row while the walls disagreed with it.
+    def _relocalize(self, walls, front: FrontEnd, cam_k: StereoCamera, pan: float, found_here: int | None = None):
+        """Relocalize when no landmark was found where the pose puts them in ``health.relocalize_frames`` frames
+        in a row while the walls fitted in the frame disagreed with it (:meth:`_walls_offsets`).
 
-        A copy of the filter has its position covariance widened by factors of 4 (up to ``health.max_inflation``)
-        until the walls' offsets fit as a typical sample and is updated with them (:meth:`JointEKF.update_pose`).
-        The frame is modelled again from that pose; only if a pattern of at least ``health.min_pattern``
-        landmarks is then associated and jointly compatible is the copy kept. Returns ``(filter, factor, model,
-        associations)`` or None."""
-        method = self.method
+        Two ways, the first that works wins; either makes a copy of the filter, models the frame again from its
+        pose and keeps the copy only if a pattern of at least ``health.min_pattern`` landmarks is then associated
+        and jointly compatible. Returns ``(filter, factor, model, associations, way)`` (``"lines"`` or
+        ``"walls"``) or None.
+
+        1. From the landmarks on the frame's lines (:func:`~stablemarks.estimation.relocalize.pose_from_lines`):
+           the pose within ``health.relocalize_radius`` of the prediction (and its heading within 3 σ + 1°: a
+           wrong pan turns the view, and must not be taken for a turn of the robot) that puts the most landmarks
+           on a line, if at least ``min_pattern + 1`` and two more than any other place. The copy's pose is
+           re-initialised there, uncorrelated with the landmarks (the odometry that correlated them was wrong),
+           with σ three times what the tolerance of one line allows at the landmarks' depth.
+        2. From the walls: the copy's position covariance is widened by factors of 4 (up to
+           ``health.max_inflation``) until the walls' offsets fit as a typical sample, and updated with them
+           (:meth:`JointEKF.update_pose`). Two parallel walls fix the position across them and the heading
+           together, so this alone can turn the heading (the room: 13° off after a 0.5 m slip).
+        """
+        ways = [("lines", lambda: self._relocation_from_lines(front, cam_k, found_here))]
+        if walls is not None:
+            ways.append(("walls", lambda: self._relocation_from_walls(walls)))
+        for how, way in ways:
+            probe, factor = way()
+            if probe is None:
+                continue
+            model = self.method.model(front, cam_k, self.world_map, probe.pose, probe.cov_pose, self._probe_config)
+            report: dict = {}
+            assoc = self.method.associate(probe, front, model, pan, cam_k, report, self._max_incidence)
+            pattern = max(report.get("compatible") or [[]], key=len)
+            if len(pattern) >= self.config.health.min_pattern:
+                return probe, factor, model, assoc, how
+        return None
+
+    def _relocation_from_walls(self, walls) -> tuple[JointEKF | None, float]:
+        """A copy of the filter updated with the walls' offsets ``(nu, H, R)``, its position covariance first
+        widened until they fit (:meth:`_relocalize`, way 2), and the factor."""
         nu, H, R = walls
 
         def m2(P):
@@ -408,13 +439,39 @@ class Localizer:
             probe.inflate_pose(4.0, position_only=True)
             factor *= 4.0
         probe.update_pose(nu, H, R)
-        model = method.model(front, cam_k, self.world_map, probe.pose, probe.cov_pose, self._probe_config)
-        report: dict = {}
-        assoc = method.associate(probe, front, model, pan, cam_k, report, self._max_incidence)
-        pattern = max(report.get("compatible") or [[]], key=len)
-        if len(pattern) < self.config.health.min_pattern:
-            return None
-        return probe, factor, model, assoc
+        return probe, factor
+
+    def _relocation_from_lines(self, front: FrontEnd, cam_k: StereoCamera, found_here: int | None = None
+                               ) -> tuple[JointEKF | None, float]:
+        """A copy of the filter re-initialised at the pose that puts the most landmarks on the frame's lines
+        (:meth:`_relocalize`, way 1), and the factor by which its position variance exceeds the prior's; or
+        ``(None, 1)``. With ``found_here`` (the landmarks the frame associated where the pose puts them), the pose
+        must put two more than that on a line, and lie beyond the prior's 99.9 % bound (otherwise the frame is no
+        evidence of a slip or a kidnap)."""
+        ekf, h = self.ekf, self.config.health
+        ids = ekf.landmark_ids
+        if len(ids) <= h.min_pattern:
+            return None, 1.0
+        P = np.array([ekf.landmark_position(i) for i in ids])
+        pairs = front.kept_pairs
+        tight = 3.0 * self.camera.sigma_img
+        found = pose_from_lines(cam_k, P, ids, pairs.u_left, pairs.u_right, ekf.pose, radius=h.relocalize_radius,
+                                heading=3.0 * math.sqrt(ekf.cov_pose[2, 2]) + math.radians(1.0),
+                                tol_px=h.relocalize_tol_px, tight_px=tight, sigma_img=self.camera.sigma_img)
+        if found is None or len(found.inliers) < max(h.min_pattern + 1, found.runner_up + 2):
+            return None, 1.0
+        if found_here is not None:
+            d = found.pose - ekf.pose
+            d[2] = float(wrap_angle(d[2]))
+            if len(found.inliers) < found_here + 2 or float(d @ np.linalg.solve(ekf.cov_pose, d)) <= POSE_GATE_CHI2:
+                return None, 1.0
+        depth = cam_k.to_camera(found.pose, P[[ids.index(i) for i in found.inliers]])[1]
+        s_th = 3.0 * tight / cam_k.f
+        s_xy = s_th * float(np.median(depth))
+        cov = np.diag([s_xy**2, s_xy**2, s_th**2])
+        probe = ekf.copy()
+        probe.reset_pose(found.pose, cov)
+        return probe, max(1.0, float(np.trace(cov[:2, :2]) / np.trace(ekf.cov_pose[:2, :2])))
 
     def _missed_landmarks(self, model: FrameLandmarks | None, assoc, pan: float, dropped: list[int]) -> list[int]:
         """Wall landmarks predicted in view on a wall modelled in this frame (a boundary found) but not
@@ -570,7 +627,7 @@ class Localizer:
         front = model = None
         entered = Entered()
         method = self.method
-        nis_high = disagree = edges_missing = turned = False
+        nis_high = disagree = edges_missing = turned = reinitialised = False
         edges_found = True
         if method.uses_vision:
             check_pair(np.asarray(left), np.asarray(right))
@@ -624,16 +681,31 @@ class Localizer:
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
                 max(len(m) for m in report["incompatible"]) >= self.config.health.min_pattern
             relocated = walls = None
+            reinitialised = False
             if not disagree and not turned and not assoc and model is not None and self.ekf.visible(pan):
                 # no landmark found and no pattern either: a kidnap that moved the walls beyond even the widened
                 # bands? The walls themselves, fitted where they are, say where the robot is (_relocalize), once
                 # they have disagreed with the pose in health.relocalize_frames frames in a row.
                 walls = self._walls_offsets(front, cam_k)
             self._lost_frames = self._lost_frames + 1 if walls is not None else 0
-            if walls is not None and self._lost_frames >= self.config.health.relocalize_frames:
+            if walls is not None and self._lost_frames >= self.config.health.relocalize_frames and \
+                    self.health.drift is None:  # after heading_drift the estimate is dead reckoning's (module health)
                 relocated = self._relocalize(walls, front, cam_k, pan)
+            if relocated is None and not turned and not pan_suspect and model is not None:
+                # Landmarks found, but few of those in view: after a slip across the view a few lines can fit a few
+                # landmarks at the wrong pose (the corridor, 0.5 m sideways: three, jointly compatible, held the
+                # heading 3° off). Where the frame's lines put many more of them elsewhere, the robot is there.
+                n_view = len(self.ekf.visible(pan, self._max_incidence))
+                if n_view > self.config.health.min_pattern and 2 * len(assoc) < n_view:
+                    relocated = self._relocalize(None, front, cam_k, pan, found_here=len(assoc))
             if relocated is not None:
-                self.ekf, record.inflation, model, assoc = relocated
+                self.ekf, record.inflation, model, assoc, how = relocated
+                reinitialised = how == "lines"
+                if reinitialised:
+                    record.warnings.append(
+                        f"relocalized: the pose re-initialised at ({self.ekf.pose[0]:.3f} m, {self.ekf.pose[1]:.3f} m, "
+                        f"{np.degrees(self.ekf.pose[2]):.1f}°) from the landmarks on the frame's lines, "
+                        f"{np.hypot(*(self.ekf.pose[:2] - record.pose[:2])):.2f} m from the prediction")
                 disagree = True
                 pan_suspect = edges_missing = False
                 edges_found = True
@@ -649,6 +721,7 @@ class Localizer:
                     self.health.runs["odometry_disagrees"] + 1 >= self.config.health.disagree_frames:
                 record.inflation, _ = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
                 assoc = method.associate(self.ekf, front, model, pan, cam_k, max_incidence=self._max_incidence)
+            recovering = record.inflation != 1.0 or reinitialised  # the pose moved beyond the prediction's gates
             assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma)
             dropped += self._missed_landmarks(model, assoc, pan, dropped)
             for i in dropped:
@@ -659,7 +732,7 @@ class Localizer:
             n_view = len(self.ekf.visible(pan, self._max_incidence)) if assoc else 0
             block = self.config.sad.block_size
             one_line = lone_gate_px(self.ekf, assoc, pan, front.kept_pairs.u_left, block) \
-                if 0 < len(assoc) < self.config.health.min_pattern and record.inflation == 1.0 else 0.0
+                if 0 < len(assoc) < self.config.health.min_pattern and not recovering else 0.0
             if len(assoc) > 1 and one_line > 2 * block:
                 # Two landmarks whose lines lie within one SAD window of each other (aisle: two edges 4 cm apart, 3 m
                 # away, after 22 blind frames with the heading 12° off) are one line to the pose, with the same
@@ -669,7 +742,7 @@ class Localizer:
                     f"landmarks {ids} were the only ones associated, their lines within one {block} px SAD window of "
                     f"each other, in a gate of ±{one_line:.0f} px: not used until another line confirms them")
                 assoc = []
-            if len(assoc) == 1 and record.inflation == 1.0:
+            if len(assoc) == 1 and not recovering:
                 # One line alone cannot be checked against anything: with a 2-D measurement and a 3-D pose, joint
                 # compatibility accepts whatever lies in its gate. While the pose is well known the gate is a few
                 # pixels wide; when it spans more than two SAD windows either side (after a turn, a blind stretch),
@@ -689,7 +762,7 @@ class Localizer:
                         f"landmark {assoc[0][0]} was the only one of the {n_view} in view associated: not used until "
                         "another one confirms it")
                     assoc = []
-            if 1 < len(assoc) < self.config.health.min_pattern and record.inflation == 1.0:
+            if 1 < len(assoc) < self.config.health.min_pattern and not recovering:
                 # A small pattern among many landmarks in view: after an odometry error in a turn, two neighbouring
                 # lines can fit two landmarks together (loop: 2 of 8 found, the heading held 4.8° off). Not used
                 # when finding so few is unlikely at the rate this run finds the landmarks in its view.
@@ -700,7 +773,7 @@ class Localizer:
                         f"only {len(assoc)} of the {n_view} landmarks in view were associated (probability {p:.1g} "
                         f"at this run's rate of finding them, {found / (found + missed):.0%}): not used")
                     assoc = []
-            elif len(assoc) >= self.config.health.min_pattern and record.inflation == 1.0:
+            elif len(assoc) >= self.config.health.min_pattern and not recovering:
                 self._found[0] += min(len(assoc), n_view)
                 self._found[1] += max(0, n_view - len(assoc))
             record.associated = [int(i) for i, _ in assoc]
@@ -709,7 +782,7 @@ class Localizer:
                 pairs = front.kept_pairs
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
                 res = self.ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k,
-                                      iterations=1 if record.inflation == 1.0 else 5)
+                                      iterations=1 if not recovering else 5)
                 record.measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen]
                 record.observed = [int(i) for i in res.ids]
                 record.nis = [float(v) for v in res.nis]
@@ -722,7 +795,7 @@ class Localizer:
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
                                        self.config)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
-            if not pan_suspect and record.inflation == 1.0 and self.config.ekf.edge_updates and model is not None \
+            if not pan_suspect and not recovering and self.config.ekf.edge_updates and model is not None \
                     and len(record.observed) >= self.config.health.min_pattern and not self.health.active:
                 record.edge_measurements = self._update_edges(model, entered, record.measurements, pan)
             timings["select"] = time.perf_counter() - t3
@@ -740,7 +813,8 @@ class Localizer:
         record.pan_command = self.command_pan()
         record.health = self.health.update(edges_missing=edges_missing, nis_high=nis_high, disagree=disagree,
                                            observed=bool(record.observed), has_landmarks=self.ekf.n_landmarks > 0,
-                                           inflation=record.inflation, edges_found=edges_found, drift=drift)
+                                           inflation=record.inflation, edges_found=edges_found, drift=drift,
+                                           reinitialised=reinitialised)
         if not self.health.edges_latched and not turned:
             self._turn_ref = None
         timings["total"] = time.perf_counter() - t0

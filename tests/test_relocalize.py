@@ -1,0 +1,129 @@
+"""Relocalization from the landmarks on a frame's lines, after a slip or a kidnap (issue: knowing when it is lost).
+
+``pose_from_lines`` on synthetic lines (a known pose, line noise, lines of unmapped objects); the localizer's
+recovery from 0.5 m added to the odometry in three directions, on sequences of seeds other than the ones the
+health thresholds were measured on."""
+
+import csv
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from stablemarks.cli import main
+from stablemarks.estimation.relocalize import pose_from_lines
+from stablemarks.geometry import StereoCamera, wrap_angle
+from stablemarks.metrics import pose_nees
+from stablemarks.sim.export import write_simulated_sequence
+from stablemarks.sim.run import simulate_run
+from stablemarks.sim.scenario import load_scenario
+
+CAMERA = StereoCamera(width=640, height=480, f=560.0, cu=319.5, cv=239.5, baseline=0.1, mount_x=0.1, mount_y=0.02,
+                      pan=0.15)
+
+
+def _scene(rng, n=10, clutter=12, noise=0.1):
+    """Landmarks on two walls 2.5–4 m ahead of the true pose, the lines the frame sees of them (column noise
+    ``noise`` px) and lines of ``clutter`` unmapped objects, shuffled."""
+    truth = np.array([1.0, 2.0, 0.4])
+    cam_pose = CAMERA.camera_pose(truth)
+    s = np.linspace(-1.2, 1.2, n)
+    depth = np.where(np.arange(n) % 2 == 0, 3.0, 3.8) + 0.1 * rng.standard_normal(n)
+    c, sn = np.cos(cam_pose.theta), np.sin(cam_pose.theta)
+    P = np.stack([cam_pose.x + c * depth - sn * s, cam_pose.y + sn * depth + c * s], axis=1)
+    uv = CAMERA.project_columns(truth, P) + noise * rng.standard_normal((n, 2))
+    junk_d = rng.uniform(1.5, 5.0, clutter)
+    junk_s = rng.uniform(-1.5, 1.5, clutter)
+    junk = CAMERA.project_columns(truth, np.stack([cam_pose.x + c * junk_d - sn * junk_s,
+                                                   cam_pose.y + sn * junk_d + c * junk_s], axis=1))
+    lines = np.concatenate([uv, junk])
+    lines = lines[np.all(np.isfinite(lines), axis=1)]
+    rng.shuffle(lines)
+    return truth, P, lines
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_pose_is_found_from_the_landmarks_on_the_lines(seed):
+    rng = np.random.default_rng(seed)
+    truth, P, lines = _scene(rng)
+    prior = truth + np.array([0.45, -0.3, np.radians(1.5)])  # a slip: far outside any gate of a confident filter
+    found = pose_from_lines(CAMERA, P, np.arange(len(P)) + 100, lines[:, 0], lines[:, 1], prior, radius=1.0,
+                            heading=np.radians(4.0), tol_px=10.0, tight_px=0.75, sigma_img=0.25)
+    assert found is not None
+    assert np.linalg.norm(found.pose[:2] - truth[:2]) < 0.02
+    assert abs(float(wrap_angle(found.pose[2] - truth[2]))) < np.radians(0.3)
+    assert len(found.inliers) >= len(P) - 1 and set(found.inliers) <= set(range(100, 100 + len(P)))
+    assert found.runner_up < len(found.inliers) - 2  # nowhere else fits nearly as well
+
+
+def test_no_pose_outside_the_region_searched():
+    rng = np.random.default_rng(3)
+    truth, P, lines = _scene(rng)
+    kwargs = dict(tol_px=10.0, tight_px=0.75, sigma_img=0.25)
+    far = truth + np.array([1.5, 0.0, 0.0])
+    got = pose_from_lines(CAMERA, P, np.arange(len(P)), lines[:, 0], lines[:, 1], far, radius=1.0,
+                          heading=np.radians(4.0), **kwargs)
+    assert got is None or np.linalg.norm(got.pose[:2] - far[:2]) <= 1.0
+    turned = truth + np.array([0.0, 0.0, np.radians(10.0)])  # a wrong pan turns the view: not taken for a turn
+    got = pose_from_lines(CAMERA, P, np.arange(len(P)), lines[:, 0], lines[:, 1], turned, radius=1.0,
+                          heading=np.radians(4.0), **kwargs)
+    assert got is None or abs(float(wrap_angle(got.pose[2] - turned[2]))) <= np.radians(4.0)
+    assert got is None or len(got.inliers) < len(P) // 2
+    assert pose_from_lines(CAMERA, P[:1], [0], lines[:, 0], lines[:, 1], truth, radius=1.0, heading=0.1,
+                           **kwargs) is None
+
+
+def _kidnapped(src, dst, column, amount, after=10):
+    shutil.copytree(src, dst)
+    with open(dst / "odometry.csv") as f:
+        rows = list(csv.DictReader(f))
+    for k, r in enumerate(rows):
+        if k > after:
+            r[column] = str(float(r[column]) + amount)
+    with open(dst / "odometry.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return dst
+
+
+@pytest.fixture(scope="module")
+def sequences(tmp_path_factory):
+    """Lab, room and corridor with their scenarios' own seeds (the health tests use seed 11)."""
+    root = tmp_path_factory.mktemp("reloc")
+    return {name: write_simulated_sequence(simulate_run(load_scenario(name)), root / name)
+            for name in ("lab", "room", "corridor")}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["lab", "room", "corridor"])
+@pytest.mark.parametrize("column, amount", [("y", 0.5), ("y", -0.5), ("x", 0.5)])
+def test_a_slip_in_any_direction_is_reported_and_recovered(sequences, tmp_path, capsys, name, column, amount):
+    """Before the relocalization from the lines, on these sequences: the room's +0.5 m in y was reported at frame
+    16 and never recovered (final position NEES 59, ATE after the jump equal to dead reckoning's); the corridor's
+    +0.5 m in x was never reported (three landmarks fitted at the wrong pose with the heading 3.5° off, final NEES
+    141).
+
+    Not solved: the lab's +0.5 m in x (sideways, its landmarks all on walls seen frontally at 2 m, where a shift
+    across the view looks like a turn): all six landmarks are associated at the wrong pose in the jump's frame,
+    jointly compatible with the line noise the filter assumes (NIS 3.3–4 each), and the update turns the heading
+    8.5° instead of moving the robot; warning at frame 14 (edges_not_found), final NEES 75."""
+    if (name, column) == ("lab", "x"):
+        pytest.xfail("a sideways slip in front of one frontal wall is taken for a turn (docstring)")
+    seq = _kidnapped(sequences[name], tmp_path / "kid", column, amount)
+    assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    first = [line for line in err.splitlines() if line.startswith("warning: frame")]
+    assert first and "odometry_disagrees" in first[0] and int(first[0].split()[2]) <= 13, err
+    log = [json.loads(line) for line in (tmp_path / "out" / "log.jsonl").read_text().splitlines()]
+    poses = np.array([r["pose"] for r in log])
+    truth = np.array([r["true_pose"] for r in log])
+    e = poses[-1, :2] - truth[-1, :2]
+    assert e @ np.linalg.solve(np.array(log[-1]["cov_pose"])[:2, :2], e) < 9.21  # χ²₂ 99 %
+    assert pose_nees(poses[-1:], np.array([log[-1]["cov_pose"]]), truth[-1:])[0] < 11.34  # χ²₃ 99 %
+    dr = np.array([r["dead_reckoning"] for r in log])
+    after = slice(14, None)
+    ate = np.sqrt(np.mean(np.sum((poses[after, :2] - truth[after, :2]) ** 2, axis=1)))
+    ate_dr = np.sqrt(np.mean(np.sum((dr[after, :2] - truth[after, :2]) ** 2, axis=1)))
+    assert ate <= 0.5 * ate_dr

@@ -46,7 +46,8 @@ class LineRelocation:
 
 def pose_from_lines(camera: StereoCamera, landmarks: np.ndarray, ids, u_left, u_right, prior_pose, *,
                     radius: float, heading: float, tol_px: float, tight_px: float, sigma_img: float,
-                    refine: int = 30, min_distance: float = 0.15, distinct: tuple[float, float] = (0.10, np.radians(2.0)),
+                    refine: int = 30, min_distance: float = 0.15,
+                    distinct: tuple[float, float] = (0.10, np.radians(2.0)),
                     max_hypotheses: int = 20000) -> LineRelocation | None:
     """The robot pose that puts the most landmarks on the frame's lines, from pairs of landmarks matched with
     pairs of lines a consistent distance apart.

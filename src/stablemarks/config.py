@@ -211,7 +211,7 @@ class Config:
 
 PRESETS = {
     "paper": {"noise": {"sigma_img": 0.5, "boundary_px": None, "free_boundary_px": None},
-              "ekf": {"edge_updates": False}, "landmarks": {"off_wall_min_lines": 0, "off_wall_frames": 0}},
+              "ekf": {"edge_updates": False}, "landmarks": {"off_wall_min_lines": 0}},
 }
 """Named configurations: ``paper`` — the paper's σ_img = 0.5 px (Sec 2.3.1), a boundary known to within the
 SAD window (``w / sqrt(12)``), which reproduce Table 1's σ, and a filter

@@ -34,12 +34,10 @@ condition's name first):
     at both ends allow. A head pan that changes without being recorded (a recording without its pan, a wrong
     pan topic) turns the walls slowly; the filter takes the turn into the heading frame by frame, each step
     within its gates, and ``edges_not_found`` never holds (the corridor with its pans left out: 0.2 rad taken in
-    over 30 frames, ATE three times dead reckoning's). It also holds when, over the last ``travel_distance``
-    metres driven, the robot travelled off the heading the images give by more than ``drift_sigma`` σ (a robot
-    drives along its heading, the images give the camera's: ``Localizer._travel_drift``), and when the pose had
-    to be recovered (``odometry_disagrees``) in ``max_recoveries`` of the last ``recoveries_frames`` frames (a
-    slip or a kidnap is an event; the images and the odometry disagreeing again and again is a wrong model: the
-    corridor without its pans, eight recoveries in 42 frames). From then on the estimate is dead reckoning (the pose
+    over 30 frames, ATE three times dead reckoning's). It also holds when the pose had to be recovered
+    (``odometry_disagrees``) in ``max_recoveries`` of the last ``recoveries_frames`` frames (a slip or a kidnap is
+    an event; the images and the odometry disagreeing again and again is a wrong model: the corridor without its
+    pans, eight recoveries in 42 frames). From then on the estimate is dead reckoning (the pose
     and its covariance from the start pose and the odometry alone: the images' history is not to be trusted) and
     nothing is associated, updated or entered; it holds for the rest of the run.
 """
@@ -97,27 +95,21 @@ class HealthConfig:
     corridor, office and hall): at most 2.5 σ over 5 frames; the corridor with its pans left out: 4 σ at frame
     24, 5 σ at 25."""
 
-    travel_distance: float = 1.5
-    """Metres driven over which the direction the robot travelled is compared with the heading the estimate gives
-    (``heading_drift``)."""
     max_recoveries: int = 3
     """``heading_drift`` holds when the pose had to be recovered (``odometry_disagrees``) in this many of the last
     ``recoveries_frames`` frames (none on clean runs of the built-in scenarios; one after a slip or a kidnap)."""
     recoveries_frames: int = 20
-    travel_frames: int = 40
-    """At most this many frames back for ``travel_distance`` (a robot that stands or turns in place travels
-    nowhere)."""
 
     def __post_init__(self) -> None:
         for name in ("edges_frames", "nis_frames", "disagree_frames", "blind_frames", "min_pattern", "drift_frames",
-                     "relocalize_frames", "travel_frames", "max_recoveries", "recoveries_frames"):
+                     "relocalize_frames", "max_recoveries", "recoveries_frames"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(expected("a positive integer", v, where=f"health.{name}"))
         v = self.few_found_p
         if isinstance(v, bool) or not isinstance(v, int | float) or not 0 <= v < 1:
             raise ConfigError(expected("a probability in [0, 1)", v, where="health.few_found_p"))
-        for name in ("relocalize_radius", "relocalize_tol_px", "travel_distance"):
+        for name in ("relocalize_radius", "relocalize_tol_px"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (math.isfinite(v) and v > 0):
                 raise ConfigError(expected("a positive number", v, where=f"health.{name}"))
@@ -147,8 +139,6 @@ MESSAGES = {
     "blind": "blind: no landmark observed for {n} frames",
     "heading_drift": "heading_drift: the images turned the heading {drift:+.1f}° from the odometry's over {w} frames "
                      "({z:.1f} σ): " + _PAN_OR_ODOMETRY,
-    "heading_drift_travel": "heading_drift: the robot travelled {drift:+.1f}° off the heading the images give over "
-                            "the last {d:.1f} m ({z:.1f} σ): " + _PAN_OR_ODOMETRY,
     "heading_drift_recoveries": "heading_drift: the images and the odometry disagreed in {r} of the last {rw} frames "
                                 "(each taken for a wheel slip or a kidnap): " + _PAN_OR_ODOMETRY,
 }
@@ -173,8 +163,8 @@ class HealthMonitor:
         ``edges_found``: whether the frame found its walls where the map puts them, which is what clears
         ``edges_not_found`` (default: not ``edges_missing``; a frame can be neither, e.g. one wall turned).
         ``drift``: ``(turn [deg], z)`` when the images turned the heading from the odometry's beyond
-        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on); a third item ``"travel"`` (the
-        robot travelled ``turn`` off the estimate's heading) or ``"recoveries"`` (too many recoveries) says why.
+        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on); a third item ``"recoveries"``
+        says it holds for too many recoveries instead.
         ``reinitialised``: the pose was re-initialised from the landmarks in this frame rather than its covariance
         widened (the sentence of ``odometry_disagrees`` says so)."""
         c = self.config
@@ -202,7 +192,7 @@ class HealthMonitor:
                 return MESSAGES[f"heading_drift_{kind}"]
             return MESSAGES[k]
         return [message(k).format(n=self.runs[k], factor=inflation, drift=turn, z=z, w=c.drift_frames,
-                                  d=c.travel_distance, r=c.max_recoveries, rw=c.recoveries_frames)
+                                  r=c.max_recoveries, rw=c.recoveries_frames)
                 for k in CONDITIONS if self.holds(k)]
 
     def suspect_edges(self, edges_missing: bool, edges_found: bool | None = None) -> bool:

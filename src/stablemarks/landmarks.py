@@ -63,10 +63,9 @@ class LandmarkConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0):
                 raise InputError(expected("a positive number", v, where=f"landmarks.{name}"))
-        for name in ("off_wall_min_lines", "off_wall_frames"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise InputError(expected("a whole number >= 0", v, where=f"landmarks.{name}"))
+        v = self.off_wall_min_lines
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise InputError(expected("a whole number >= 0", v, where="landmarks.off_wall_min_lines"))
         if not (np.isfinite(self.min_contrast) and self.min_contrast >= 0):
             raise InputError(expected("a number of gray levels >= 0", self.min_contrast,
                                       where="landmarks.min_contrast"))
@@ -120,13 +119,6 @@ class LandmarkConfig:
     5–10 times their scatter, and a desk's edge 0.2 m in front of a wall at 6.5 m was 1–2.4 σ off its wall with
     it and 4–12 σ with the lines' own scatter. The data can only make the test stricter than the model, never
     looser. 0: the model's σ_img alone (the paper's test)."""
-    off_wall_frames: int = 3
-    """A landmark is also tested against its wall over all the frames that associated it: the weighted mean of
-    its line's offsets from the fitted walls, each with the σ of that frame's off-wall test, must lie within
-    ``off_wall_sigma`` σ of the mean (σ falling as 1/√n), once seen in this many frames
-    (``Localizer._off_wall_over_frames``). An edge a few cm in front of a far wall passes every single frame's
-    test (the office: a cabinet 5.5 cm off its wall at 4.4–5.5 m, below the 7–12 cm one frame resolves there)
-    but not twenty frames together. 0: each frame alone (the paper's test)."""
     off_wall_floor_px: float = 0.05
     """The least column noise [px] the off-wall test assumes of a line, however clean the frame's lines look:
     a single line errs by its own texture and by sub-pixel interpolation's pull towards whole pixels, which the

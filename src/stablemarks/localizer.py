@@ -38,7 +38,7 @@ from .estimation.association import lone_gate_px
 from .estimation.relocalize import pose_from_lines
 from .geometry import SE2, StereoCamera, wrap_angle
 from .health import HealthMonitor
-from .landmarks import REASON_SCATTER, SLOPE_GATE_CHI2, common_turn, fit_disagreements, seen_wall_jacobian
+from .landmarks import SLOPE_GATE_CHI2, common_turn, fit_disagreements, seen_wall_jacobian
 from .maps import Map
 from .methods import Entered, Method, method_named
 from .pipeline import FrameLandmarks, FrontEnd, Regions, check_pair, disparity_limits, plane_regions, run_front_end
@@ -293,16 +293,9 @@ class Localizer:
         """Per frame: (estimate's heading − dead reckoning's [rad, unwrapped], the estimate's heading σ [rad], the
         odometry's heading variance summed since the start [rad²]): the ``heading_drift`` test."""
         self._odo_heading_var = 0.0
-        self._travel: collections.deque = collections.deque(maxlen=self.config.health.travel_frames)
-        """Per frame: (the heading the prediction turned the odometry's increment by [rad], the increment (3,) and its
-        covariance (3, 3), the estimate's position (2,), its covariance (2, 2) and its heading variance [rad²] after
-        the frame): the travel test of ``heading_drift`` (:meth:`_travel_drift`)."""
         self._missed: dict[int, int] = {}
         self._recoveries: collections.deque = collections.deque()
         """Frames of the last ``health.recoveries_frames`` in which the pose was recovered (``odometry_disagrees``)."""
-        self._wall_offsets: dict[int, list] = {}
-        """Per wall landmark: (Σ G/σ², Σ 1/σ², frames) of its line's offsets from the fitted walls
-        (:meth:`_off_wall_over_frames`)."""
         self._found = list(FOUND_PRIOR)
         """Landmarks found and missed among those predicted in view, over the frames where a pattern of at least
         ``health.min_pattern`` was used, plus :data:`FOUND_PRIOR`: the run's rate of finding landmarks in view."""
@@ -520,84 +513,6 @@ class Localizer:
         z = (d1 - d0) / math.sqrt(q1 - q0 + (s0 + s1) ** 2)
         return (math.degrees(d1 - d0), z) if abs(z) > self.config.health.drift_sigma else None
 
-    def _off_wall_over_frames(self, model: FrameLandmarks | None, assoc) -> list[int]:
-        """Wall landmarks whose line, over all the frames that associated it, lies off its wall
-        (``landmarks.off_wall_frames``): the mean of the frames' offsets ``G`` of the line from the fitted wall,
-        weighted by ``1/σ²`` with ``σ`` that frame's off-wall σ (the lines' part scaled by what the frame's lines
-        show, with the fit's part), beyond ``landmarks.off_wall_sigma`` times its σ ``(Σ 1/σ²)^-½``, in at least
-        ``off_wall_frames`` frames. Frames whose line the model did not place on the landmark's wall count
-        nothing."""
-        need = self.config.landmarks.off_wall_frames
-        if model is None or not need:
-            return []
-        by_pair = {c.pair: c for c in model.candidates}
-        limit = self.config.landmarks.off_wall_sigma
-        out = []
-        for i, j in assoc:
-            c = by_pair.get(j)
-            plane = self.ekf.landmark_plane(i)
-            if c is None or plane is None or plane.id != c.plane_id or not np.isfinite(c.sigma_wall_offset) \
-                    or c.reason == REASON_SCATTER:
-                continue
-            var = (model.line_noise_scale * c.sigma_wall_line) ** 2 + c.sigma_wall_fit**2
-            if not var > 0:
-                continue
-            acc = self._wall_offsets.setdefault(i, [0.0, 0.0, 0])
-            acc[0] += c.wall_offset / var
-            acc[1] += 1.0 / var
-            acc[2] += 1
-            if acc[2] >= need and abs(acc[0] / acc[1]) > limit / math.sqrt(acc[1]):
-                out.append(i)
-        for i in out:
-            self._wall_offsets.pop(i, None)
-        return out
-
-    def _travel_drift(self) -> tuple[float, float] | None:
-        """``(angle [deg], z)`` when the robot has travelled off the heading the estimate gives: over the last
-        ``health.travel_distance`` metres driven (at most ``health.travel_frames`` frames), the estimate's
-        displacement is turned from the odometry's increments, each turned by the estimate's heading when it was
-        applied, by more than ``health.drift_sigma`` σ; else None.
-
-        A robot drives along its heading; the images give the heading of the camera. When the head's pan is not the
-        one recorded (a recording without its pan, a wrong pan topic), the filter takes the pan's error into the
-        heading while the landmarks hold the position where it is: the robot is then predicted to drive off to one
-        side, frame after frame, and is pulled back. A slowly changing pan hides in the heading's own drift
-        (``_heading_drift``; the corridor without its pan column: 2–4° over its first 20 frames, within the
-        odometry's heading noise) but not in the direction of travel, which the positions at both ends of a few
-        metres fix to a fraction of a degree. σ² of the angle: the lateral variances of both ends' positions and of
-        the increments (in the direction across the travel, over the distance²) and the largest heading variance
-        of the estimate along the way."""
-        h = self.config.health
-        travel = self._travel
-        if len(travel) < 2:
-            return None
-        driven, moved = 0.0, np.zeros(2)
-        var_lat_odo = []
-        start = None
-        for k in range(len(travel) - 1, 0, -1):
-            th, U, cov_U = travel[k][:3]
-            c, s = math.cos(th), math.sin(th)
-            moved += (c * U[0] - s * U[1], s * U[0] + c * U[1])
-            driven += math.hypot(U[0], U[1])
-            var_lat_odo.append(float(cov_U[1, 1]))
-            if driven >= h.travel_distance:
-                start = k - 1
-                break
-        if start is None:
-            return None
-        p0, P0 = travel[start][3], travel[start][4]
-        p1, P1 = travel[-1][3], travel[-1][4]
-        seen = p1 - p0
-        norm = float(np.hypot(*moved))
-        if norm < 0.5 * h.travel_distance:
-            return None
-        across = np.array([-moved[1], moved[0]]) / norm
-        angle = math.atan2(float(moved[0] * seen[1] - moved[1] * seen[0]), float(moved @ seen))
-        var = (float(across @ P0 @ across) + float(across @ P1 @ across) + sum(var_lat_odo)) / norm**2
-        var += max(t[5] for t in list(travel)[start:])
-        z = angle / math.sqrt(var)
-        return (math.degrees(angle), z) if abs(z) > h.drift_sigma else None
-
     def _recheck_boundaries(self, model: FrameLandmarks, pan: float, record: FrameRecord) -> FrameLandmarks:
         """``model`` with the candidates of every snapped boundary that the frame's update makes incompatible with
         the map's free edge rejected (not entered).
@@ -697,7 +612,6 @@ class Localizer:
         pan = float(pan)
         odo_pose, U = self._increment(odometry)
         cov_U = None
-        heading_before = float(self.ekf.pose[2])
         if U is not None:
             cov_U = self.config.odometry.covariance(SE2.from_array(U))
             self.ekf.predict(U, cov_U)
@@ -811,19 +725,11 @@ class Localizer:
                 assoc = method.associate(self.ekf, front, model, pan, cam_k, max_incidence=self._max_incidence)
             recovering = record.inflation != 1.0 or reinitialised  # the pose moved beyond the prediction's gates
             assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma)
-            off = self._off_wall_over_frames(model, assoc)
-            if off:
-                record.warnings.append(
-                    f"landmark{'s' if len(off) > 1 else ''} {', '.join(str(i) for i in off)}: the line's offsets from "
-                    f"its wall over the frames that saw it put it off the wall: dropped")
-                dropped += off
-                assoc = [(i, j) for i, j in assoc if i not in off]
             dropped += self._missed_landmarks(model, assoc, pan, dropped)
             for i in dropped:
                 self.retired[i] = self.ekf.landmark(i)
                 self.ekf.remove_landmark(i)
                 self._missed.pop(i, None)
-                self._wall_offsets.pop(i, None)
             record.dropped = dropped
             n_view = len(self.ekf.visible(pan, self._max_incidence)) if assoc else 0
             block = self.config.sad.block_size
@@ -898,17 +804,11 @@ class Localizer:
         drift = None
         if method.uses_vision and self.health.drift is None:
             if record.inflation != 1.0 or reinitialised:
-                self._travel.clear()  # the pose jumped: the way it came is not a path travelled
                 self._recoveries.append(k)
-            if U is not None:
-                P = self.ekf.cov_pose
-                self._travel.append((heading_before, U, cov_U, self.ekf.pose[:2].copy(), P[:2, :2].copy(),
-                                     float(P[2, 2])))
             h = self.config.health
             while self._recoveries and self._recoveries[0] <= k - h.recoveries_frames:
                 self._recoveries.popleft()
-            travel = self._travel_drift()
-            drift = self._heading_drift() or (None if travel is None else (*travel, "travel")) or \
+            drift = self._heading_drift() or \
                 ((0.0, 0.0, "recoveries") if len(self._recoveries) >= h.max_recoveries else None)
         if drift is not None:
             # the images' heading has run away from the odometry's: fall back on dead reckoning (module health)

@@ -659,9 +659,6 @@ class FrameLandmarks:
     candidates: list[Candidate]
     warnings: list[str]
     timings: dict[str, float]
-    line_noise_scale: float = 1.0
-    """What the frame's own lines show of their column noise, as a fraction of ``noise.sigma_img``
-    (:func:`~stablemarks.landmarks.off_wall_by_lines`; 1: the model's)."""
 
     @property
     def selected(self) -> list[Candidate]:
@@ -736,11 +733,11 @@ def select_landmarks(
     # walls whose own lines scatter about their fit give nothing; then the off-wall test once more with the line
     # noise the frame's own lines show, when below the model's (landmarks.off_wall_by_lines)
     before = [len(m.rejected_boundaries) for m in models]
-    models, scale = off_wall_by_lines(models, config.landmarks, camera.sigma_img)
+    models, _ = off_wall_by_lines(models, config.landmarks, camera.sigma_img)
     warnings += [why for m, n in zip(models, before, strict=True) for _, why in m.rejected_boundaries[n:]]
     cands = [c for m in models for c in m.candidates]
     timings = {"disparity": t_disp, "planes": t_fit, "landmarks": t_model, "total": time.perf_counter() - t0}
-    return FrameLandmarks(front, X, cov_X, preds, fits, models, cands, warnings, timings, min(scale, 1.0))
+    return FrameLandmarks(front, X, cov_X, preds, fits, models, cands, warnings, timings)
 
 
 def process_frame(left, right, camera: StereoCamera, world_map: Map, X, cov_X, config: Config = Config(), *,

@@ -5,11 +5,14 @@ decisions)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from stablemarks import landmarks as L
+from stablemarks import planes as P
 from stablemarks.config import Config
-from stablemarks.maps import ray_distances
+from stablemarks.maps import Map, ray_distances, visible_parts
 
 
 # ------------------------------------------------------------------ the gap to another wall beyond an edge
@@ -121,3 +124,108 @@ def test_robust_minimum_variance_equals_the_reference(scenario_frames, scenario_
                 assert got[1:] == want[1:]
                 n_out += not lo <= float(np.mean(cols[L.robust_rows(cols, k)])) <= hi
     assert len(cases) > 300 and n_out > 20
+
+
+# ------------------------------------------------------------------ the plane prediction's ends
+def predict_plane_reference(camera, X, cov_X, plane, config):
+    """The former :func:`~stablemarks.planes.predict_plane`: the ends' columns projected twice (the columns, then
+    :meth:`~stablemarks.geometry.StereoCamera.cov_columns`), the window by ``np.nanmin`` / ``np.nanmax`` and
+    ``np.clip``."""
+    X = np.asarray(X, dtype=float)
+    cov_X = np.asarray(cov_X, dtype=float)
+    gate = config.gate_sigma
+    ends = np.stack([plane.P1, plane.P2])
+    uv = camera.project_columns(X, ends)
+    cov_I = camera.cov_columns(X, cov_X, ends)  # Eq 5: known wall ends
+    sig = np.sqrt(np.stack([cov_I[:, 0, 0], cov_I[:, 1, 1]], axis=-1) + camera.sigma_img**2)
+    edges = {
+        w: P.EdgePrediction(w, ends[i], uv[i], sig[i], w in plane.free_edges) for i, w in enumerate(("p1", "p2"))
+    }
+    _, Zc = camera.to_camera(X, ends)
+    if np.all(~(Zc > 1e-3)):
+        return None
+    W = camera.width
+    if np.all(np.isfinite(uv[:, 0])):
+        lo = np.nanmin(uv[:, 0] - gate * sig[:, 0])
+        hi = np.nanmax(uv[:, 0] + gate * sig[:, 0])
+    else:  # one end behind the camera: the wall runs out of the image on that side
+        inside = np.isfinite(uv[:, 0])
+        u_in = uv[inside, 0][0]
+        s_in = sig[inside, 0][0]
+        parts = visible_parts(Map((plane,)), camera, X, max_range=config.max_range, margin_px=-config.view_margin_px)
+        if not parts:
+            return None
+        probe = plane.point_at(np.array([np.mean(parts[0].intervals[0])]))[0]
+        u_probe = camera.project_columns(X, probe)[0]
+        lo, hi = (u_in - gate * s_in, W - 0.5) if u_probe >= u_in else (-0.5, u_in + gate * s_in)
+    u0 = int(np.clip(np.ceil(lo), 0, W - 1))
+    u1 = int(np.clip(np.floor(hi), 0, W - 1))
+    if hi < 0 or lo > W - 1 or u1 < u0:
+        return None
+    columns = np.arange(u0, u1 + 1)
+    Z, J_Z_X = P.column_depth_on_wall(camera, X, plane, columns, jacobian=True)
+    ok = np.isfinite(Z) & (Z <= config.max_range)
+    if not ok.any():
+        return None
+    columns, Z, J_Z_X = columns[ok], Z[ok], J_Z_X[ok]
+    d, J_d_X = camera.disparity_at_depth(Z, J_Z_X)
+    var_d = camera.disparity_variance(J_d_X, cov_X, config.sigma_nu(camera))
+    z_low, z_high = plane.z
+    v_top = camera.cv + camera.f * (camera.mount_height - z_high) / Z
+    v_bottom = camera.cv + camera.f * (camera.mount_height - z_low) / Z
+    return P.PlanePrediction(plane, columns, d, np.sqrt(var_d), v_top, v_bottom, edges, gate)
+
+
+def assert_same_prediction(a, b) -> None:
+    """Two plane predictions (or None) are the same bit for bit: every array, every edge."""
+    assert (a is None) == (b is None)
+    if a is None:
+        return
+    assert a.plane is b.plane and a.gate == b.gate
+    for name in ("columns", "d", "sigma_d", "v_top", "v_bottom"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True), name
+    assert list(a.edges) == list(b.edges)
+    for e, x in a.edges.items():
+        y = b.edges[e]
+        assert (x.which, x.free) == (y.which, y.free)
+        for name in ("point", "u", "sigma"):
+            assert np.array_equal(getattr(x, name), getattr(y, name), equal_nan=True), name
+
+
+def test_predict_plane_equals_the_reference(scenario_frames):
+    """Every wall of every scenario map from every frame's pose and perturbed ones (ends behind the camera, walls
+    out of view), with the prior and a wide one: the same prediction bit for bit, or none alike."""
+    config = Config()
+    rng = np.random.default_rng(61)
+    n = 0
+    for frame in scenario_frames:
+        camera = config.camera(frame[4])
+        for X in [frame[6]] + [frame[6] + rng.normal(0, [0.5, 0.5, 0.3]) for _ in range(3)]:
+            for cov in (np.diag([0.05, 0.05, 0.02]) ** 2, np.diag([0.5, 0.5, 0.2]) ** 2):
+                for plane in frame[5]:
+                    got = P.predict_plane(camera, X, cov, plane, config.planes)
+                    assert_same_prediction(got, predict_plane_reference(camera, X, cov, plane, config.planes))
+                    n += got is not None
+    assert n > 100
+
+
+# ------------------------------------------------------------------ the camera frame's pose as Python floats
+def test_camera_frame_equals_the_reference():
+    """:meth:`StereoCamera._frame` of poses given as float64, float32 and integer arrays, lists and tuples of NumPy
+    scalars: the same five numbers as with each element taken by ``float`` (the former code)."""
+    from stablemarks.geometry import StereoCamera
+
+    rng = np.random.default_rng(67)
+    for _ in range(500):
+        cam = StereoCamera(mount_x=float(rng.normal(0, 0.2)), mount_y=float(rng.normal(0, 0.2)),
+                           pan=float(rng.uniform(-1, 1)))
+        X = np.array([rng.normal(0, 5), rng.normal(0, 5), rng.uniform(-7, 7)])
+        for pose in (X, X.astype(np.float32), np.round(X).astype(int), X.tolist(), tuple(np.float32(v) for v in X)):
+            x, y, th = (float(v) for v in pose)
+            c_th, s_th = math.cos(th), math.sin(th)
+            psi = (th + cam.pan + math.pi) % (2.0 * math.pi) - math.pi
+            want = (x + (c_th * cam.mount_x - s_th * cam.mount_y), y + (s_th * cam.mount_x + c_th * cam.mount_y), psi,
+                    math.cos(psi), math.sin(psi))
+            got = cam._frame(pose)
+            assert all(type(v) is float for v in got) and got == want

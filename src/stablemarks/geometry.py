@@ -139,8 +139,9 @@ class StereoCamera:
     def _frame(self, X) -> tuple[float, float, float, float, float]:
         """Left optical centre ``(c_x, c_y)`` [m] in the world, camera heading ``psi = theta + pan`` wrapped to
         ``[-pi, pi)`` [rad] and its ``(cos psi, sin psi)``, as Python floats (per-call cost matters: every
-        projection and triangulation starts here)."""
-        x, y, th = (float(v) for v in X)
+        projection and triangulation starts here; ``tolist`` of the float64 array: the same numbers as ``float`` of
+        each element, in a fifth of the time)."""
+        x, y, th = np.asarray(X, dtype=float).tolist()
         c_th, s_th = math.cos(th), math.sin(th)
         psi = (th + self.pan + math.pi) % (2.0 * math.pi) - math.pi
         cx = x + (c_th * self.mount_x - s_th * self.mount_y)

@@ -353,8 +353,8 @@ def _block_row_ends(block, v0, u0, c0, c1, outward, max_hole):  # pragma: no cov
             if 0 <= c < w and block[i, c]:
                 j += 1
                 continue
-            q = j + 1  # the next region pixel after the hole that starts at j
-            while q < n:
+            q = j + 1  # the next region pixel after the hole that starts at j (not looked for beyond the widest
+            while q < n and q - j <= max_hole:  # hole crossed: the run ends there whatever follows)
                 c = first + step * q - u0
                 if 0 <= c < w and block[i, c]:
                     break

@@ -200,8 +200,9 @@ def predict_plane(
     cov_X = np.asarray(cov_X, dtype=float)
     gate = config.gate_sigma
     ends = np.stack([plane.P1, plane.P2])
-    uv = camera.project_columns(X, ends)
-    cov_I = camera.cov_columns(X, cov_X, ends)  # Eq 5: known wall ends
+    # Eq 5, known wall ends: StereoCamera.cov_columns from the one projection that gives the columns too
+    uv, J_X, _ = camera.project_columns(X, ends, jacobians=True)
+    cov_I = J_X @ cov_X @ np.swapaxes(J_X, -1, -2)
     sig = np.sqrt(np.stack([cov_I[:, 0, 0], cov_I[:, 1, 1]], axis=-1) + camera.sigma_img**2)
     edges = {
         w: EdgePrediction(w, ends[i], uv[i], sig[i], w in plane.free_edges) for i, w in enumerate(("p1", "p2"))
@@ -212,8 +213,8 @@ def predict_plane(
         return None
     W = camera.width
     if np.all(np.isfinite(uv[:, 0])):
-        lo = np.nanmin(uv[:, 0] - gate * sig[:, 0])
-        hi = np.nanmax(uv[:, 0] + gate * sig[:, 0])
+        lo = _nan_extreme(min, (uv[:, 0] - gate * sig[:, 0]).tolist())
+        hi = _nan_extreme(max, (uv[:, 0] + gate * sig[:, 0]).tolist())
     else:  # one end behind the camera: the wall runs out of the image on that side
         inside = np.isfinite(uv[:, 0])
         u_in = uv[inside, 0][0]
@@ -225,8 +226,8 @@ def predict_plane(
         probe = plane.point_at(np.array([np.mean(parts[0].intervals[0])]))[0]
         u_probe = camera.project_columns(X, probe)[0]
         lo, hi = (u_in - gate * s_in, W - 0.5) if u_probe >= u_in else (-0.5, u_in + gate * s_in)
-    u0 = int(np.clip(np.ceil(lo), 0, W - 1))
-    u1 = int(np.clip(np.floor(hi), 0, W - 1))
+    u0 = int(min(max(float(np.ceil(lo)), 0.0), W - 1))  # np.clip of the whole number, on Python floats
+    u1 = int(min(max(float(np.floor(hi)), 0.0), W - 1))
     if hi < 0 or lo > W - 1 or u1 < u0:
         return None
     columns = np.arange(u0, u1 + 1)
@@ -241,6 +242,12 @@ def predict_plane(
     v_top = camera.cv + camera.f * (camera.mount_height - z_high) / Z
     v_bottom = camera.cv + camera.f * (camera.mount_height - z_low) / Z
     return PlanePrediction(plane, columns, d, np.sqrt(var_d), v_top, v_bottom, edges, gate)
+
+
+def _nan_extreme(pick, values: list[float]) -> float:
+    """``np.nanmin`` (``pick`` = min) or ``np.nanmax`` (max) of a few Python floats, at least one of them not NaN:
+    the extreme of those that are not NaN."""
+    return pick(v for v in values if v == v)
 
 
 def predict_planes(camera: StereoCamera, X, cov_X, world_map: Map, config: PlaneConfig = PlaneConfig()):

@@ -229,3 +229,86 @@ def test_camera_frame_equals_the_reference():
                     math.cos(psi), math.sin(psi))
             got = cam._frame(pose)
             assert all(type(v) is float for v in got) and got == want
+
+
+# ------------------------------------------------------------------ the relative model's central differences
+def relative_error_model_reference(camera, fit, boundary, u_left, u_right, t, measured=False, step_px=0.01,
+                                   step_line=1e-4):
+    """The former :func:`~stablemarks.landmarks.relative_error_model`: every perturbed column triangulated and fused
+    with the line in NumPy batches."""
+    cov_ub = boundary.cov_uv_measured if measured and boundary.cov_uv_measured is not None else boundary.cov_uv
+    if cov_ub is None:
+        return None, None, None
+    X = fit.X
+    n_f = len(np.atleast_1d(u_left))
+    u_f = np.stack([np.asarray(u_left, dtype=float).ravel(), np.asarray(u_right, dtype=float).ravel()], axis=-1)
+    steps = np.array([[0.0, 0.0], [step_px, 0.0], [-step_px, 0.0], [0.0, step_px], [0.0, -step_px]])
+    uf = u_f[None, :, :] + steps[:, None, :]
+    ub = np.asarray(boundary.u, dtype=float)[None, :] + steps
+    P_f, cov_f = camera.triangulate(uf[..., 0], uf[..., 1], X)
+    P_b, cov_b = camera.triangulate(ub[:, 0], ub[:, 1], X, cov_uv=cov_ub)
+    nrm = fit.plane.normal
+    hf = np.stack([P_f[0] - step_line * nrm, P_f[0] + step_line * nrm])
+    hb = np.stack([P_b[0] - step_line * nrm, P_b[0] + step_line * nrm])
+    cov_hf = np.broadcast_to(cov_f[0], hf.shape + (2,))
+    cov_hb = np.broadcast_to(cov_b[0], hb.shape + (2,))
+    F, _ = fit.fuse_point(np.concatenate([P_f, hf]), np.concatenate([cov_f, cov_hf]))
+    B, _ = fit.fuse_point(np.concatenate([P_b, hb]), np.concatenate([cov_b, cov_hb]))
+    F[5] += step_line * nrm
+    F[6] -= step_line * nrm
+    B[5] += step_line * nrm
+    B[6] -= step_line * nrm
+    slope = []
+    for h in (step_line, -step_line):
+        slope.append((fit.fuse_point(P_f[0], cov_f[0], b=fit.b + h)[0]
+                      - fit.fuse_point(P_b[0], cov_b[0], b=fit.b + h)[0]) @ t)
+    base_b = B[0]
+    J = np.empty((n_f, 4))
+    J[:, 0] = ((F[5] - B[5]) @ t - (F[6] - B[6]) @ t) / (2 * step_line)
+    J[:, 1] = (slope[0] - slope[1]) / (2 * step_line)
+    J[:, 2] = ((F[0] - B[1]) @ t - (F[0] - B[2]) @ t) / (2 * step_px)
+    J[:, 3] = ((F[0] - B[3]) @ t - (F[0] - B[4]) @ t) / (2 * step_px)
+    own = (((F[1] - base_b) @ t - (F[2] - base_b) @ t) / (2 * step_px) * camera.sigma_img) ** 2
+    own += (((F[3] - base_b) @ t - (F[4] - base_b) @ t) / (2 * step_px) * camera.sigma_img) ** 2
+    cov_shared = np.zeros((4, 4))
+    cov_shared[:2, :2] = fit.cov_R
+    cov_shared[2:, 2:] = cov_ub
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(own))):
+        return None, None, None
+    return J, np.sqrt(own), cov_shared
+
+
+def test_relative_error_model_equals_the_reference(scenario_frames, scenario_models):
+    """The error model of every plane's members from every boundary found, both boundary variances (``measured``),
+    at the members' columns and at columns moved by up to a few pixels (a pair of crossed columns: none), two
+    steps: the same shared covariance bit for bit, the Jacobians and own σ to 1e-9 of their size (the 2×2 and dot
+    products summed left to right where NumPy's may fuse multiply-adds: the derivatives differ by ~1e-12), None
+    alike."""
+    config = Config()
+    rng = np.random.default_rng(71)
+    n = n_none = 0
+    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
+        camera = config.camera(frame[4])
+        pairs = front.kept_pairs
+        for plane in model.planes:
+            idx = np.flatnonzero(plane.members)
+            for b in plane.boundaries:
+                t = L._inward(plane.fit.plane, b.edge)
+                for measured in (False, True):
+                    ul, ur = pairs.u_left[idx], pairs.u_right[idx]
+                    for u_l, u_r in ((ul, ur), (ul + rng.normal(0, 2, len(ul)), ur + rng.normal(0, 2, len(ur))),
+                                     (ur, ul)):
+                        for steps in ((0.01, 1e-4), (0.1, 1e-3)):
+                            got = L.relative_error_model(camera, plane.fit, b, u_l, u_r, t, measured, *steps)
+                            want = relative_error_model_reference(camera, plane.fit, b, u_l, u_r, t, measured, *steps)
+                            assert (got[0] is None) == (want[0] is None)
+                            if want[0] is None:
+                                n_none += 1
+                                continue
+                            J, own, cov = got
+                            assert J.shape == want[0].shape and own.shape == want[1].shape
+                            assert np.allclose(J, want[0], rtol=1e-9, atol=1e-9 * np.abs(want[0]).max())
+                            assert np.allclose(own, want[1], rtol=1e-9, atol=1e-9 * np.abs(want[1]).max())
+                            assert np.array_equal(cov, want[2])
+                            n += 1
+    assert n > 40 and n_none > 5

@@ -556,41 +556,45 @@ def _fuse_points(P, cov_P, P1, t, nrm, a, b, s0, cov_R):  # pragma: no cover - n
     n = P.shape[0]
     P_hat = np.empty((n, 2))
     cov_hat = np.empty((n, 2, 2))
+    for i in range(n):
+        (P_hat[i, 0], P_hat[i, 1]), (cov_hat[i, 0, 0], cov_hat[i, 0, 1], cov_hat[i, 1, 0], cov_hat[i, 1, 1]) = \
+            fuse_one(P[i, 0], P[i, 1], cov_P[i, 0, 0], cov_P[i, 0, 1], cov_P[i, 1, 0], cov_P[i, 1, 1], P1, t, nrm,
+                     a, b, s0, cov_R)
+    return P_hat, cov_hat
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def fuse_one(p0, p1, c00, c01, c10, c11, P1, t, nrm, a, b, s0, cov_R):  # pragma: no cover - numba
+    """:func:`_fuse_points` of one point ``(p0, p1)`` with covariance ``[[c00, c01], [c10, c11]]``, for numba
+    callers: ``((p̂0, p̂1), (ĉ00, ĉ01, ĉ10, ĉ11))``."""
     H0 = nrm[0] - b * t[0]
     H1 = nrm[1] - b * t[1]
-    for i in range(n):
-        px = P[i, 0] - P1[0]
-        py = P[i, 1] - P1[1]
-        ds = (px * t[0] + py * t[1]) - s0
-        G = (px * nrm[0] + py * nrm[1]) - a - b * ds
-        g0 = -1.0
-        g1 = -ds
-        var_V = g0 * cov_R[0, 0] * g0 + g0 * cov_R[0, 1] * g1 + g1 * cov_R[1, 0] * g0 + g1 * cov_R[1, 1] * g1
-        c00, c01, c10, c11 = cov_P[i, 0, 0], cov_P[i, 0, 1], cov_P[i, 1, 0], cov_P[i, 1, 1]
-        PH0 = c00 * H0 + c01 * H1
-        PH1 = c10 * H0 + c11 * H1
-        S = (PH0 * H0 + PH1 * H1) + var_V
-        K0 = PH0 / S
-        K1 = PH1 / S
-        P_hat[i, 0] = P[i, 0] - K0 * G  # innovation 0 − G(L̃)
-        P_hat[i, 1] = P[i, 1] - K1 * G
-        A00 = 1.0 - K0 * H0
-        A01 = 0.0 - K0 * H1
-        A10 = 0.0 - K1 * H0
-        A11 = 1.0 - K1 * H1
-        M00 = A00 * c00 + A01 * c10
-        M01 = A00 * c01 + A01 * c11
-        M10 = A10 * c00 + A11 * c10
-        M11 = A10 * c01 + A11 * c11
-        R00 = (M00 * A00 + M01 * A01) + var_V * (K0 * K0)
-        R01 = (M00 * A10 + M01 * A11) + var_V * (K0 * K1)
-        R10 = (M10 * A00 + M11 * A01) + var_V * (K1 * K0)
-        R11 = (M10 * A10 + M11 * A11) + var_V * (K1 * K1)
-        cov_hat[i, 0, 0] = 0.5 * (R00 + R00)
-        cov_hat[i, 0, 1] = 0.5 * (R01 + R10)
-        cov_hat[i, 1, 0] = 0.5 * (R10 + R01)
-        cov_hat[i, 1, 1] = 0.5 * (R11 + R11)
-    return P_hat, cov_hat
+    px = p0 - P1[0]
+    py = p1 - P1[1]
+    ds = (px * t[0] + py * t[1]) - s0
+    G = (px * nrm[0] + py * nrm[1]) - a - b * ds
+    g0 = -1.0
+    g1 = -ds
+    var_V = g0 * cov_R[0, 0] * g0 + g0 * cov_R[0, 1] * g1 + g1 * cov_R[1, 0] * g0 + g1 * cov_R[1, 1] * g1
+    PH0 = c00 * H0 + c01 * H1
+    PH1 = c10 * H0 + c11 * H1
+    S = (PH0 * H0 + PH1 * H1) + var_V
+    K0 = PH0 / S
+    K1 = PH1 / S
+    A00 = 1.0 - K0 * H0
+    A01 = 0.0 - K0 * H1
+    A10 = 0.0 - K1 * H0
+    A11 = 1.0 - K1 * H1
+    M00 = A00 * c00 + A01 * c10
+    M01 = A00 * c01 + A01 * c11
+    M10 = A10 * c00 + A11 * c10
+    M11 = A10 * c01 + A11 * c11
+    R00 = (M00 * A00 + M01 * A01) + var_V * (K0 * K0)
+    R01 = (M00 * A10 + M01 * A11) + var_V * (K0 * K1)
+    R10 = (M10 * A00 + M11 * A01) + var_V * (K1 * K0)
+    R11 = (M10 * A10 + M11 * A11) + var_V * (K1 * K1)
+    # innovation 0 − G(L̃); the covariance symmetrized
+    return (p0 - K0 * G, p1 - K1 * G), (0.5 * (R00 + R00), 0.5 * (R01 + R10), 0.5 * (R10 + R01), 0.5 * (R11 + R11))
 
 
 def median(x: np.ndarray) -> float:

@@ -312,3 +312,98 @@ def test_relative_error_model_equals_the_reference(scenario_frames, scenario_mod
                             assert np.array_equal(cov, want[2])
                             n += 1
     assert n > 40 and n_none > 5
+
+
+# ------------------------------------------------------------------ one ray, one sight line past the map's walls
+def test_one_ray_equals_ray_distances_and_segments_block(scenario_frames):
+    """:func:`~stablemarks.maps.nearest_crossing` and :func:`~stablemarks.maps.sight_blocked` of single rays and sight
+    lines from every frame's camera (and random points) past every scenario map's walls but one (or all):
+    :func:`~stablemarks.maps.ray_distances` and :func:`~stablemarks.maps.segments_block` of the same, bit for bit;
+    :meth:`Map.others` the walls, the index left out and those kept as before."""
+    from stablemarks.maps import kept_walls, nearest_crossing, segments_block, sight_blocked
+
+    rng = np.random.default_rng(73)
+    n = n_hit = n_blocked = 0
+    for frame in scenario_frames:
+        world_map = frame[5]
+        walls = world_map.segments()
+        ids = [p.id for p in world_map]
+        for plane_id in [*ids, "not a wall"]:
+            got_walls, exclude, kept = world_map.others(plane_id)
+            assert np.array_equal(got_walls, walls) and not got_walls.flags.writeable
+            assert exclude == ([ids.index(plane_id)] if plane_id in ids else [])
+            assert np.array_equal(kept, kept_walls(len(walls), exclude))
+            for _ in range(30):
+                o = np.asarray(frame[6][:2], float) + rng.normal(0, 1.0, 2)
+                a = rng.uniform(-np.pi, np.pi)
+                ray = np.array([np.cos(a), np.sin(a)])
+                want = ray_distances(o, ray, walls, exclude=exclude)[0]
+                got = nearest_crossing(float(o[0]), float(o[1]), float(ray[0]), float(ray[1]), got_walls, kept)
+                assert got == want
+                target = walls[rng.integers(len(walls)), rng.integers(2)] + rng.normal(0, 0.01, 2)
+                d = target - o
+                blocked = bool(segments_block(o, target, walls, exclude=exclude)[0])
+                assert sight_blocked(float(o[0]), float(o[1]), float(d[0]), float(d[1]), got_walls, kept) == blocked
+                n += 1
+                n_hit += bool(np.isfinite(want))
+                n_blocked += blocked
+    assert n > 1000 and n_hit > 300 and n_blocked > 100
+
+
+def edge_occluded_reference(camera, X, world_map, plane, edge):
+    """The former :func:`~stablemarks.landmarks.edge_occluded`: :func:`~stablemarks.maps.segments_block`."""
+    from stablemarks.maps import segments_block
+
+    walls, exclude = L._other_walls(world_map, plane)
+    return bool(segments_block(camera.optical_centres(X)[0], plane.edge(edge), walls, exclude=exclude)[0])
+
+
+def test_edge_occluded_equals_the_reference(scenario_frames):
+    """Both ends of every wall of every scenario map from every frame's pose and perturbed ones: the same answer."""
+    config = Config()
+    rng = np.random.default_rng(79)
+    n = n_yes = 0
+    for frame in scenario_frames:
+        camera = config.camera(frame[4])
+        for X in [frame[6]] + [frame[6] + rng.normal(0, [1.0, 1.0, 0.5]) for _ in range(5)]:
+            for plane in frame[5]:
+                for edge in ("p1", "p2"):
+                    got = L.edge_occluded(camera, X, frame[5], plane, edge)
+                    assert got is edge_occluded_reference(camera, X, frame[5], plane, edge)
+                    n += 1
+                    n_yes += got
+    assert n > 500 and 50 < n_yes < n - 50
+
+
+# ------------------------------------------------------------------ the frame's line noise
+def robust_scale_reference(candidates):
+    """The former :func:`~stablemarks.landmarks._robust_scale`: ``np.isfinite`` and ``np.median``."""
+    z = []
+    for c in candidates:
+        sigma = c.sigma_wall_line
+        if np.isfinite(c.wall_offset) and np.isfinite(sigma) and sigma > 0:
+            z.append(abs(c.wall_offset) / sigma)
+    return (1.4826 * float(np.median(z)) if z else np.nan), len(z)
+
+
+def test_robust_scale_equals_the_reference(scenario_models):
+    """Every scenario frame's candidates, all of them and random subsets (even and odd counts, none), with offsets
+    and σ made NaN, infinite or zero here and there: the same scale and count, bit for bit."""
+    rng = np.random.default_rng(83)
+    n = 0
+    for _, _, _, model in scenario_models:
+        cands = list(model.candidates)
+        for _ in range(20):
+            chosen = [c for c in cands if rng.random() < 0.6]
+            changed = []
+            for c in chosen:
+                r = rng.random()
+                if r < 0.05:
+                    c = L._replace(c, wall_offset=float(rng.choice([np.nan, np.inf])))
+                elif r < 0.1:
+                    c = L._replace(c, sigma_wall_offset=float(rng.choice([np.nan, np.inf, 0.0])), sigma_wall_fit=0.0)
+                changed.append(c)
+            got, want = L._robust_scale(changed), robust_scale_reference(changed)
+            assert got[1] == want[1] and (got[0] == want[0] or (np.isnan(got[0]) and np.isnan(want[0])))
+            n += got[1]
+    assert n > 200

@@ -30,7 +30,7 @@ from numba import njit
 
 from .errors import InputError, expected
 from .geometry import StereoCamera
-from .maps import Map, _crossing, kept_walls, ray_distances, segments_block
+from .maps import Map, nearest_crossing, sight_blocked
 from .planes import PlaneConfig, PlaneFit, fuse_one, median, plane_members
 
 REASON_NEAR_BOUNDARY = "near boundary"
@@ -997,13 +997,14 @@ def on_wall_reason(c: Candidate, config: LandmarkConfig, z_range: tuple[float, f
 
 
 def _robust_scale(candidates: list[Candidate]) -> tuple[float, int]:
-    """``1.4826 · median |G| / σ_line`` over the candidates with a finite offset, and their number."""
+    """``1.4826 · median |G| / σ_line`` over the candidates with a finite offset, and their number (``math.isfinite``
+    and :func:`~stablemarks.planes.median` of the finite ratios: NumPy's answers, without its per-call overhead)."""
     z = []
     for c in candidates:
         sigma = c.sigma_wall_line
-        if np.isfinite(c.wall_offset) and np.isfinite(sigma) and sigma > 0:
+        if math.isfinite(c.wall_offset) and math.isfinite(sigma) and sigma > 0:
             z.append(abs(c.wall_offset) / sigma)
-    return (1.4826 * float(np.median(z)) if z else np.nan), len(z)
+    return (1.4826 * median(np.array(z)) if z else np.nan), len(z)
 
 
 def line_noise_scale(candidates: list[Candidate], min_lines: int, floor: float = 0.0) -> float:
@@ -1608,8 +1609,8 @@ def _inner_columns(camera: StereoCamera, X, plane, edge: str, depth: float = 0.3
 
 def _other_walls(world_map: Map, plane) -> tuple[np.ndarray, list[int]]:
     """The map's walls (K, 2, 2) and the index of ``plane`` among them to leave out (none if not in the map)."""
-    ids = [w.id for w in world_map]
-    return world_map.segments(), ([ids.index(plane.id)] if plane.id in ids else [])
+    walls, exclude, _ = world_map.others(plane.id)
+    return walls, exclude
 
 
 def other_wall_gap(camera: StereoCamera, fit: PlaneFit, world_map: Map, edge: str, search_sigma: float) -> float:
@@ -1632,13 +1633,13 @@ def other_wall_gap(camera: StereoCamera, fit: PlaneFit, world_map: Map, edge: st
     outer = lo if u_e < u_i else hi
     outer = u_e + 2.0 * (outer - u_e)
     cols = np.linspace(u_e, outer, max(2, int(abs(outer - u_e)) + 1))
-    walls, exclude = _other_walls(world_map, fit.plane)
+    walls, exclude, kept = world_map.others(fit.plane.id)
     if len(walls) == len(exclude):
         return np.inf
     cx, cy, psi, c, s = camera._frame(fit.X)
     d_edge, sigma = fit.prediction.disparity_at(u_e)
-    hit = _first_wall_in_band(cols, float(camera.cu), float(camera.f), c, s, cx, cy, walls,
-                              kept_walls(len(walls), exclude), float(np.cos(psi)), float(np.sin(psi)),
+    hit = _first_wall_in_band(cols, float(camera.cu), float(camera.f), c, s, cx, cy, walls, kept,
+                              float(np.cos(psi)), float(np.sin(psi)),
                               float(camera.f * camera.baseline), float(d_edge),
                               float(fit.prediction.gate * sigma + 1.0))
     return float(abs(cols[hit] - u_e)) if hit >= 0 else np.inf
@@ -1662,12 +1663,7 @@ def _first_wall_in_band(cols, cu, f, c, s, cx, cy, walls, kept, fwd0, fwd1, fb, 
         norm = np.sqrt(d0 * d0 + d1 * d1)
         r0 = d0 / norm
         r1 = d1 / norm
-        dist = np.inf
-        for j in range(kept.shape[0]):
-            lam = _crossing(cx, cy, r0, r1, walls, kept[j])
-            if lam > 1e-9 and lam < dist:
-                dist = lam
-        Z = dist * (r0 * fwd0 + r1 * fwd1)
+        Z = nearest_crossing(cx, cy, r0, r1, walls, kept) * (r0 * fwd0 + r1 * fwd1)
         d = fb / Z if np.isfinite(Z) and Z > 0 else 0.0
         if abs(d - d_edge) <= tol:
             return i
@@ -1687,8 +1683,10 @@ def edge_incidence(camera: StereoCamera, X, plane, edge: str) -> float:
 def edge_occluded(camera: StereoCamera, X, world_map: Map, plane, edge: str) -> bool:
     """Whether another wall of the map stands between the left camera and the wall's end ``edge``: the region
     then ends at that wall's edge, not at this one's."""
-    walls, exclude = _other_walls(world_map, plane)
-    return bool(segments_block(camera.optical_centres(X)[0], plane.edge(edge), walls, exclude=exclude)[0])
+    walls, _, kept = world_map.others(plane.id)
+    cx, cy, *_ = camera._frame(X)  # the left optical centre; segments_block of its one sight line
+    ex, ey = plane.edge(edge).tolist()
+    return bool(sight_blocked(cx, cy, ex - cx, ey - cy, walls, kept))
 
 
 def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, offset_px: float) -> float:
@@ -1710,8 +1708,8 @@ def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, o
     r0, r1 = c + s * xn, s - c * xn
     norm = math.sqrt(r0 * r0 + r1 * r1)
     ray = np.array([r0 / norm, r1 / norm])
-    walls, exclude = _other_walls(world_map, plane)
-    dist = ray_distances(camera.optical_centres(X)[0], ray, walls, exclude=exclude)[0]
+    walls, _, kept = world_map.others(plane.id)
+    dist = nearest_crossing(cx, cy, float(ray[0]), float(ray[1]), walls, kept)  # ray_distances of the one ray
     cam = camera.camera_pose(X)
     Z_bg = dist * (ray @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
     return float((fb / Z_bg if np.isfinite(Z_bg) and Z_bg > 0 else 0.0) - fb / Z_e)

@@ -202,6 +202,28 @@ class Map:
             return np.zeros((0, 2, 2))
         return np.array([[p.P1, p.P2] for p in self.planes])
 
+    def others(self, plane_id: str) -> tuple[np.ndarray, list[int], np.ndarray]:
+        """The walls :meth:`segments` (K, 2, 2) (read-only: made once per map), the index of wall ``plane_id`` among
+        them to leave out (``[]`` when not in the map) and the indices of the others (:func:`kept_walls`): what the
+        landmark stage's ray casts past a wall ask of the map a dozen times a frame."""
+        cache = self._others
+        if plane_id not in cache:
+            ids = [p.id for p in self.planes]
+            exclude = [ids.index(plane_id)] if plane_id in ids else []
+            cache[plane_id] = (exclude, kept_walls(len(ids), exclude))
+        exclude, kept = cache[plane_id]
+        return self._segments, list(exclude), kept
+
+    @cached_property
+    def _segments(self) -> np.ndarray:
+        walls = self.segments()
+        walls.setflags(write=False)
+        return walls
+
+    @cached_property
+    def _others(self) -> dict[str, tuple[list[int], np.ndarray]]:
+        return {}
+
     def to_dict(self) -> dict:
         d = {"frame": self.frame}
         if any(self.accuracy):
@@ -515,6 +537,29 @@ def kept_walls(n_walls: int, exclude: Sequence[int] = ()) -> np.ndarray:
     and errors)."""
     kept = np.arange(n_walls)
     return np.delete(kept, list(exclude)) if len(exclude) else kept
+
+
+@njit(cache=True, error_model="numpy")
+def nearest_crossing(o0, o1, r0, r1, walls, kept):  # pragma: no cover - numba
+    """:func:`ray_distances` of one ray from ``(o0, o1)`` along the unit ``(r0, r1)`` to the walls ``walls[kept]``:
+    the least crossing beyond 1e-9 m, ``inf`` when none."""
+    dist = np.inf
+    for j in range(kept.shape[0]):
+        lam = _crossing(o0, o1, r0, r1, walls, kept[j])
+        if lam > 1e-9 and lam < dist:
+            dist = lam
+    return dist
+
+
+@njit(cache=True, error_model="numpy")
+def sight_blocked(o0, o1, r0, r1, walls, kept):  # pragma: no cover - numba
+    """:func:`segments_block` of one sight line from ``(o0, o1)`` to ``(o0 + r0, o1 + r1)`` past the walls
+    ``walls[kept]``: whether one crosses it strictly between its ends (:func:`_blocked`'s bounds)."""
+    for j in range(kept.shape[0]):
+        lam = _crossing(o0, o1, r0, r1, walls, kept[j])
+        if (lam > 1e-9) & (lam < 1 - 1e-6):
+            return True
+    return False
 
 
 @njit(cache=True, error_model="numpy")

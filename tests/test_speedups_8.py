@@ -407,3 +407,129 @@ def test_robust_scale_equals_the_reference(scenario_models):
             assert got[1] == want[1] and (got[0] == want[0] or (np.isnan(got[0]) and np.isnan(want[0])))
             n += got[1]
     assert n > 200
+
+
+# ------------------------------------------------------------------ the plane fit's normal equations
+def inverse_spd2_reference(N, max_cond=1e12):
+    """The former ``planes._inverse_spd2`` of a 2×2 matrix."""
+    p, q, r = N[0, 0], N[0, 1], N[1, 1]
+    det = p * r - q * q
+    lam_max = 0.5 * (p + r) + np.hypot(0.5 * (p - r), q)
+    if not lam_max > 0 or not det / lam_max * max_cond >= lam_max:
+        return None
+    return np.array([[r, -q], [-q, p]]) / det
+
+
+def fit_plane_reference(
+    camera,
+    X,
+    disparity,
+    prediction,
+    config=P.PlaneConfig(),
+) -> object:
+    """The former :func:`~stablemarks.planes.fit_plane`: the normal matrix made as an array and inverted by the
+    former ``_inverse_spd2`` (:func:`inverse_spd2_reference`), the final residuals from the inliers' points."""
+    plane = prediction.plane
+    rows, cols = prediction.box(disparity.shape[0], config.row_margin_px)
+    disp = np.ascontiguousarray(disparity[rows, cols])
+    band = P._band(disp, rows.start, prediction.d, prediction.sigma_d, prediction.v_top, prediction.v_bottom,
+                 float(prediction.gate), float(config.row_margin_px))
+    n = int(np.count_nonzero(band))
+    if n < config.min_pixels:
+        return P.FailedFit(plane, f"{n} disparity pixels in the predicted band (need {config.min_pixels})", n)
+    if np.count_nonzero(band.any(axis=0)) < config.min_columns:
+        return P.FailedFit(plane, "band pixels span too few columns", n)
+    X = np.asarray(X, dtype=float)
+    cam = camera.camera_pose(X)
+    fwd = np.array([np.cos(cam.theta), np.sin(cam.theta)])
+    right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
+    r = fwd + ((prediction.columns - camera.cu) / camera.f)[:, None] * right  # (K, 2)
+    r_s, r_o = r @ plane.direction, r @ plane.normal
+    c_s, c_o = float(plane.along(cam.translation)), float(plane.offset(cam.translation))
+    fb = camera.f * camera.baseline
+    frame = (r_s, r_o, c_s, c_o, fb, config.sigma_nu(camera))
+    if np.count_nonzero(band[rows.start % 2 :: 2, cols.start % 2 :: 2]) < config.min_pixels // 4:
+        s, o, sigma_o = P._wall_points(disp, band, 0, 0, 1, *frame)
+    else:
+        s, o, sigma_o = P._wall_points(disp, band, rows.start % 2, cols.start % 2, 2, *frame)
+    w_all = 1.0 / sigma_o**2
+    inl = np.ones(len(s), dtype=bool)
+    a, b = P.median(o), 0.0
+    s0 = P.median(s)
+    scale = 1.0
+    min_inliers = max(3, len(s) * config.min_pixels // (2 * n))
+    for _ in range(4):
+        scale, inl, wgt, s_in, o_in = P._reweight(s, o, sigma_o, w_all, inl, float(a), float(b), float(s0),
+                                                float(config.outlier_sigma))
+        if len(wgt) < min_inliers:
+            return P.FailedFit(plane, "too few pixels agree on one wall line", n)
+        sum_w = float(wgt.sum())
+        s0 = float(wgt @ s_in) / sum_w
+        ds = s_in - s0
+        w_ds = wgt * ds
+        N = np.array([[sum_w, w_ds.sum()], [w_ds.sum(), w_ds @ ds]])
+        N_inv = inverse_spd2_reference(N)
+        if N_inv is None:
+            return P.FailedFit(plane, "wall seen over too short a span to fit", n)
+        a, b = (float(v) for v in N_inv @ np.array([wgt @ o_in, w_ds @ o_in]))
+    res = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
+    chi2_dof = float(res @ res) / max(1, int(np.count_nonzero(inl)) - 2)
+    cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
+    if config.disparity_bias_px > 0:
+        depth = (s_in - c_s) * (fwd @ plane.direction) + (o_in - c_o) * (fwd @ plane.normal)
+        g = -(depth / fb) * ((o_in - c_o) - b * (s_in - c_s))
+        J_beta = N_inv @ np.array([wgt @ g, w_ds @ g])
+        cov_R = cov_R + config.disparity_bias_px**2 * np.outer(J_beta, J_beta)
+    keep = P._on_line(disp, band, *frame, a, b, s0, config.outlier_sigma * scale)
+    region = np.zeros(disparity.shape, dtype=bool)
+    region[rows, cols] = keep
+    return P.PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, int(np.count_nonzero(keep)),
+                    chi2_dof, X, (rows, cols))
+
+
+
+def test_fit_plane_equals_the_reference(scenario_frames, scenario_models):
+    """Every predicted plane of every scenario frame on its disparity image, cluttered and thinned (every failure
+    too): the same fit bit for bit (line, covariance, χ², region) or the same failure."""
+    rng = np.random.default_rng(89)
+    config = Config()
+    n_fits = 0
+    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
+        camera = config.camera(frame[4])
+        for pred in model.predictions:
+            disp = np.array(front.disparity.left)
+            cluttered = disp.copy()
+            cluttered[rng.random(disp.shape) < 0.2] += np.float32(1.5)
+            sparse = disp.copy()
+            sparse[rng.random(disp.shape) < 0.97] = np.nan
+            for d in (disp, cluttered, sparse):
+                for pc in (config.planes, P.PlaneConfig(outlier_sigma=2.0, disparity_bias_px=0.03)):
+                    new = P.fit_plane(camera, model.X, d, pred, pc)
+                    ref = fit_plane_reference(camera, model.X, d, pred, pc)
+                    assert type(new) is type(ref)
+                    if not new:
+                        assert (new.reason, new.n_pixels) == (ref.reason, ref.n_pixels)
+                        continue
+                    for name in ("a", "b", "s0", "n_points", "n_inliers", "chi2_dof"):
+                        assert getattr(new, name) == getattr(ref, name), name
+                    assert np.array_equal(new.cov_R, ref.cov_R) and np.array_equal(new.region, ref.region)
+                    n_fits += 1
+    assert n_fits > 40
+
+
+def test_inverse_spd2_equals_the_reference():
+    """:func:`~stablemarks.planes._inverse_spd2` of the three numbers against the former function of the matrix, on
+    random symmetric matrices from well to ill conditioned, singular and indefinite ones: the same inverse or None."""
+    rng = np.random.default_rng(97)
+    n_none = 0
+    for _ in range(5000):
+        p, r = rng.uniform(0, 10, 2) * 10.0 ** rng.integers(-6, 6, 2)
+        q = float(rng.choice([np.sqrt(p * r) * rng.uniform(-1, 1), np.sqrt(p * r), rng.normal() * 1e3]))
+        N = np.array([[p, q], [q, r]])
+        got, want = P._inverse_spd2(p, q, r), inverse_spd2_reference(N)
+        assert (got is None) == (want is None)
+        if want is None:
+            n_none += 1
+        else:
+            assert got.dtype == want.dtype and np.array_equal(got, want)
+    assert 100 < n_none < 4900

@@ -1418,11 +1418,9 @@ def _beside_nearer_sides(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o
     samples at offsets ``o0 … o1 − 1`` on each of ``sides`` of each line (in that order). Per line and side, as the
     former array code: each row's sample columns ``rint(u_row ± offset)``, ``u_row = u_left + slope (v − mid)``;
     a sample holds a disparity when inside the box and finite, is nearer when above ``d_wall + gate σ + 1`` at
-    its column (computed once per column of the box)."""
-    limit = np.empty(max(0, c1 - c0))
-    for col in range(c0, c1):
-        fc = float(col)
-        limit[col - c0] = _interp(fc, columns, d) + gate * _interp(fc, columns, sigma_d) + 1.0
+    its column (computed once per column of the box, when a sample there first holds a disparity: the lines'
+    samples reach a few dozen of the box's columns)."""
+    limit = np.full(max(0, c1 - c0), np.nan)
     n = len(u_left)
     out = np.zeros(n, dtype=np.int64)
     for i in range(n):
@@ -1447,7 +1445,11 @@ def _beside_nearer_sides(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o
                     if not np.isfinite(x):
                         continue
                     n_valid += 1
-                    if x > limit[col - c0]:
+                    lim = limit[col - c0]
+                    if np.isnan(lim):
+                        fc = float(col)
+                        lim = limit[col - c0] = _interp(fc, columns, d) + gate * _interp(fc, columns, sigma_d) + 1.0
+                    if x > lim:
                         n_near += 1
                 if n_valid > 0:
                     n_held += 1

@@ -408,13 +408,12 @@ def fit_plane(
         s0 = float(wgt @ s_in) / sum_w
         ds = s_in - s0
         w_ds = wgt * ds
-        N = np.array([[sum_w, w_ds.sum()], [w_ds.sum(), w_ds @ ds]])
-        N_inv = _inverse_spd2(N)
+        N_inv = _inverse_spd2(sum_w, w_ds.sum(), w_ds @ ds)  # N = [[Σw, Σw·ds], [Σw·ds, Σw·ds²]]
         if N_inv is None:
             return FailedFit(plane, "wall seen over too short a span to fit", n)
         a, b = (float(v) for v in N_inv @ np.array([wgt @ o_in, w_ds @ o_in]))
-    res = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
-    chi2_dof = float(res @ res) / max(1, int(np.count_nonzero(inl)) - 2)
+    res = _residuals(s, o, sigma_o, inl, a, b, s0)[0][inl]  # the final line's, of the final inliers
+    chi2_dof = float(res @ res) / max(1, len(res) - 2)
     # one independent measurement per `correlation_px` pixels of the full band (the subsample carries
     # len(s)/n of its information). The residuals are correlated down the column as well (13–14 px either way
     # with 15 px windows, measured on the simulator's walls); counting one measurement per window area, with
@@ -604,10 +603,10 @@ def median(x: np.ndarray) -> float:
     return float(p[k]) if len(x) % 2 else float((p[:k].max() + p[k]) / 2)
 
 
-def _inverse_spd2(N: np.ndarray, max_cond: float = 1e12) -> np.ndarray | None:
-    """Inverse of a symmetric positive semi-definite 2×2 matrix, None when its condition number (ratio of
-    its eigenvalues) exceeds ``max_cond``."""
-    p, q, r = N[0, 0], N[0, 1], N[1, 1]
+def _inverse_spd2(p, q, r, max_cond: float = 1e12) -> np.ndarray | None:
+    """Inverse of the symmetric positive semi-definite 2×2 matrix ``[[p, q], [q, r]]`` (given by its three numbers,
+    taken as float64), None when its condition number (ratio of its eigenvalues) exceeds ``max_cond``."""
+    p, q, r = np.float64(p), np.float64(q), np.float64(r)
     det = p * r - q * q
     lam_max = 0.5 * (p + r) + np.hypot(0.5 * (p - r), q)
     if not lam_max > 0 or not det / lam_max * max_cond >= lam_max:  # the smaller eigenvalue is det / lam_max

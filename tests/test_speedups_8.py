@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from stablemarks import landmarks as L
 from stablemarks import planes as P
@@ -533,3 +534,85 @@ def test_inverse_spd2_equals_the_reference():
         else:
             assert got.dtype == want.dtype and np.array_equal(got, want)
     assert 100 < n_none < 4900
+
+
+# ------------------------------------------------------------------ the right image's band, from a table
+@njit(cache=False)
+def right_band_reference(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):
+    """The former ``landmarks._right_band``: the interpolation's differences taken per pixel."""
+    h, w = sub.shape
+    K = len(d)
+    u_last = u0 + K - 1
+    out = np.zeros((h, w), dtype=np.bool_)
+    for i in range(h):
+        v = float(v0 + i)
+        for k in range(w):
+            disp = float(sub[i, k])
+            u = float(c0 + k) + disp
+            if not (u >= u0 and u <= u_last):
+                continue
+            j = int(u - u0)
+            if j == K - 1:
+                out[i, k] = (abs(disp - d[j]) <= gate * sigma_d[j] and v >= v_top[j] - row_margin
+                             and v <= v_bottom[j] + row_margin)
+                continue
+            frac = u - float(u0 + j)
+            dp = (d[j + 1] - d[j]) * frac + d[j]
+            sp = (sigma_d[j + 1] - sigma_d[j]) * frac + sigma_d[j]
+            if not abs(disp - dp) <= gate * sp:
+                continue
+            vt = (v_top[j + 1] - v_top[j]) * frac + v_top[j]
+            vb = (v_bottom[j + 1] - v_bottom[j]) * frac + v_bottom[j]
+            out[i, k] = v >= vt - row_margin and v <= vb + row_margin
+    return out
+
+
+def test_right_region_equals_the_reference(scenario_frames, scenario_models):
+    """The right image's region of every scenario plane (its whole rows, and the search windows of both edges),
+    on the frame's right disparities and on noisy ones, two row margins; and predictions of float32 arrays: the same
+    mask bit for bit as the former per-pixel differences."""
+    rng = np.random.default_rng(101)
+    n = 0
+    for _, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
+        right = np.array(front.disparity.right)
+        noisy = right + rng.normal(0, 1.0, right.shape).astype(np.float32)
+        for pred in model.predictions:
+            preds = [pred, P.PlanePrediction(pred.plane, pred.columns, *(np.asarray(a, np.float32) for a in (
+                pred.d, pred.sigma_d, pred.v_top, pred.v_bottom)), pred.edges, pred.gate)]
+            for p in preds:
+                for disp in (right, noisy):
+                    H, W = disp.shape
+                    for margin in (0.0, 4.0):
+                        for columns in (None, (int(pred.columns[0]) - 30, int(pred.columns[0]) + 40),
+                                        (int(pred.columns[-1]) - 60, int(pred.columns[-1]))):
+                            v0, c0, block = L._right_block(p, disp, margin, columns)
+                            c1 = W - 1 if columns is None else min(W - 1, int(columns[1]))
+                            cs = 0 if columns is None else max(0, int(columns[0]))
+                            if c1 < cs or block.size == 0:
+                                continue
+                            v1 = v0 + block.shape[0] - 1
+                            want = right_band_reference(disp[v0 : v1 + 1, cs : c1 + 1], cs, v0, int(p.columns[0]),
+                                                        p.d, p.sigma_d, p.v_top, p.v_bottom, float(p.gate), margin)
+                            assert c0 == cs and np.array_equal(block, want)
+                            n += int(want.sum())
+    assert n > 100_000
+
+
+def test_dilate_equals_the_reference():
+    """:func:`~stablemarks.planes.dilate` of random masks (contiguous, sliced views, one pixel, empty, other dtypes)
+    against the former uint8 copy and its ``astype(bool)``: the same mask."""
+    import cv2
+
+    rng = np.random.default_rng(103)
+    for _ in range(200):
+        H, W = (int(v) for v in rng.integers(1, 60, 2))
+        mask = rng.random((H + 5, W + 7)) < rng.uniform(0.01, 0.9)
+        for region in (mask, mask[2 : H + 2, 3 : W + 3], mask[::2, ::3], mask.astype(np.uint8)):
+            for px in (0, 1, 3):
+                got = P.dilate(region, px)
+                if px == 0:
+                    assert got is region
+                    continue
+                k = np.ones((2 * px + 1, 2 * px + 1), np.uint8)
+                want = cv2.dilate(region.astype(np.uint8), k).astype(bool)
+                assert got.dtype == bool and np.array_equal(got, want)

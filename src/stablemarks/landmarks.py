@@ -538,19 +538,20 @@ def _right_block(prediction, disparity_right: np.ndarray, row_margin: float = 0.
     v1 = min(H - 1, int(np.ceil(prediction.v_bottom.max() + row_margin)))
     if v1 < v0:
         return 0, 0, np.zeros((0, 0), dtype=bool)
-    return v0, c0, _right_band(
-        disparity_right[v0 : v1 + 1, c0 : c1 + 1], c0, v0, int(prediction.columns[0]), prediction.d,
-        prediction.sigma_d, prediction.v_top, prediction.v_bottom, float(prediction.gate), float(row_margin))
+    return v0, c0, _right_band(disparity_right[v0 : v1 + 1, c0 : c1 + 1], c0, v0, int(prediction.columns[0]),
+                               prediction.band_table, float(prediction.gate), float(row_margin))
 
 
 @njit(cache=True)
-def _right_band(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):  # pragma: no cover - numba
+def _right_band(sub, c0, v0, u0, table, gate, row_margin):  # pragma: no cover - numba
     """:func:`right_region` on the box ``sub`` (h, w) of right disparities at rows ``v0…``, columns ``c0…``,
-    for a prediction whose window's columns are ``u0, u0 + 1, …`` (consecutive): the left column
-    ``u = x + d`` must lie in the window; the band there is interpolated as ``np.interp`` does. The rows of the
-    band are interpolated only for pixels whose disparity is in it (the same mask, fewer operations)."""
+    for a prediction whose window's columns are ``u0, u0 + 1, …`` (consecutive), ``table`` its
+    :attr:`~stablemarks.planes.PlanePrediction.band_table`: the left column ``u = x + d`` must lie in the window;
+    the band there is interpolated as ``np.interp`` does (``(y[j+1] − y[j]) · frac + y[j]``, the differences
+    from the table). The rows of the band are interpolated only for pixels whose disparity is in it (the same
+    mask, fewer operations)."""
     h, w = sub.shape
-    K = len(d)
+    K = table.shape[0]
     u_last = u0 + K - 1
     out = np.zeros((h, w), dtype=np.bool_)
     for i in range(h):
@@ -562,16 +563,16 @@ def _right_band(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):
                 continue
             j = int(u - u0)
             if j == K - 1:
-                out[i, k] = (abs(disp - d[j]) <= gate * sigma_d[j] and v >= v_top[j] - row_margin
-                             and v <= v_bottom[j] + row_margin)
+                out[i, k] = (abs(disp - table[j, 0]) <= gate * table[j, 2] and v >= table[j, 4] - row_margin
+                             and v <= table[j, 6] + row_margin)
                 continue
             frac = u - float(u0 + j)
-            dp = (d[j + 1] - d[j]) * frac + d[j]
-            sp = (sigma_d[j + 1] - sigma_d[j]) * frac + sigma_d[j]
+            dp = table[j, 1] * frac + table[j, 0]
+            sp = table[j, 3] * frac + table[j, 2]
             if not abs(disp - dp) <= gate * sp:
                 continue
-            vt = (v_top[j + 1] - v_top[j]) * frac + v_top[j]
-            vb = (v_bottom[j + 1] - v_bottom[j]) * frac + v_bottom[j]
+            vt = table[j, 5] * frac + table[j, 4]
+            vb = table[j, 7] * frac + table[j, 6]
             out[i, k] = v >= vt - row_margin and v <= vb + row_margin
     return out
 
@@ -775,13 +776,14 @@ def model_features(
     c_l = [np.inf] * len(k) if contrast is None else np.asarray(contrast, dtype=float)[k].tolist()
     so_l = [np.nan] * len(k) if J_shared is None else sigma_own.tolist()
     k_l = k.tolist()
+    P_model = P_edge + d_p[:, None] * t  # Eq 15, every candidate's (row j: P_edge + d_p[j] t)
+    cov_model = var_s[:, None, None] * tt  # Eq 17: rank 1 along the wall
     out = []
     for rank, j in enumerate(np.argsort(d_p, kind="stable").tolist()):
         out.append(_new_candidate(dict(
             plane_id=plane.id, plane_label=plane.label, index=rank + 1, pair=k_l[j], edge=edge, s=d_l[j],
             sigma_b=boundary.sigma_along, sigma_f=sf_l[j],
-            P=P_edge + d_p[j] * t,  # Eq 15
-            cov=var_s[j] * tt,  # Eq 17: rank 1 along the wall
+            P=P_model[j], cov=cov_model[j],
             z_low=zl_l[j], z_high=zh_l[j], length_similarity=ls_l[j], u_left=ul_l[j], u_right=ur_l[j],
             v_top=vt_l[j], v_bottom=vb_l[j], selected=False, reason="",
             P_observed=P_hat[j], cov_observed=cov_hat[j], contrast=c_l[j],

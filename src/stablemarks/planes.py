@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -118,6 +119,20 @@ class PlanePrediction:
     @property
     def window(self) -> tuple[int, int]:
         return int(self.columns[0]), int(self.columns[-1])
+
+    @cached_property
+    def band_table(self) -> np.ndarray:
+        """(K, 8) float64, read-only: per column, ``d``, its difference to the next column's, then the same of
+        ``sigma_d``, ``v_top`` and ``v_bottom`` (0 at the last column): the linear interpolation's terms, for the
+        per-pixel loop of :func:`~stablemarks.landmarks.right_region` (made once per prediction; the differences
+        are those it computed per pixel)."""
+        table = np.zeros((len(self.d), 8))
+        for q, a in enumerate((self.d, self.sigma_d, self.v_top, self.v_bottom)):
+            a = np.asarray(a)
+            table[:, 2 * q] = a
+            table[:-1, 2 * q + 1] = a[1:] - a[:-1]  # in the array's own dtype, as the loop subtracted them
+        table.setflags(write=False)
+        return table
 
     def disparity_at(self, u) -> tuple[np.ndarray, np.ndarray]:
         """Predicted disparity and σ_d at (sub-pixel) left columns ``u`` (linear interpolation)."""
@@ -680,8 +695,10 @@ def _member_fractions(seg, offsets, pixel_uv, region, c0, v0, H, W):  # pragma: 
 
 
 def dilate(region: np.ndarray, px: int) -> np.ndarray:
-    """Binary dilation by a square of half-size ``px``."""
+    """Binary dilation by a square of half-size ``px`` (a bool mask's bytes are 0 and 1: it is dilated as uint8 in
+    place of a converted copy, and the 0 / 1 result read back as bool)."""
     if px <= 0:
         return region
     k = np.ones((2 * px + 1, 2 * px + 1), np.uint8)
-    return cv2.dilate(region.astype(np.uint8), k).astype(bool)
+    region = np.asarray(region)
+    return cv2.dilate(region.view(np.uint8) if region.dtype == bool else region.astype(np.uint8), k).view(bool)

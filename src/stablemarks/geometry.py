@@ -26,6 +26,9 @@ SIGMA_IMG = 0.5
 MIN_DEPTH = 1e-3
 """Points closer than this in front of the camera [m] are treated as not projectable."""
 
+_FEW_POINTS = 8
+"""Up to this many points :meth:`StereoCamera.project_columns` with Jacobians computes on Python floats."""
+
 
 def wrap_angle(a):
     """Wrap angles to ``[-pi, pi)``; works on scalars and arrays."""
@@ -196,6 +199,8 @@ class StereoCamera:
         cx, cy, _, c, s = self._frame(X)
         if not jacobians and p.shape == (2,):
             return self._project_point(float(p[0]) - cx, float(p[1]) - cy, c, s)
+        if jacobians and 1 <= p.ndim <= 2 and p.shape[-1] == 2 and p.size <= 2 * _FEW_POINTS:
+            return self._project_few(X, p, cx, cy, c, s)
         dx = p[..., 0] - cx
         dy = p[..., 1] - cy
         Xc = s * dx - c * dy
@@ -226,6 +231,35 @@ class StereoCamera:
         J_I_X[..., 0, 2] = dul_dXc * dXc_dth + dul_dZc * dZc_dth
         J_I_X[..., 1, 2] = dul_dXc * dXc_dth + dur_dZc * dZc_dth
         return uv, J_I_X, J_I_p
+
+    def _project_few(self, X, p: np.ndarray, cx: float, cy: float, c: float, s: float):
+        """:meth:`project_columns` with Jacobians of a few points ((2,) or (n, 2), n <= :data:`_FEW_POINTS`) on Python
+        floats, point by point: the same element-wise operations in the same order as the array code (squares as
+        products, as NumPy's), without its ~40 array operations (~20 µs whatever the number of points: a wall's two
+        ends, a map wall's end, the landmarks in view)."""
+        f, b, cu = self.f, self.baseline, self.cu
+        r0, r1 = self._centre_rate(X)
+        uv, J_X, J_p = [], [], []
+        for px, py in p.reshape(-1, 2).tolist():
+            dx, dy = px - cx, py - cy
+            Xc = s * dx - c * dy
+            Zc = c * dx + s * dy
+            Zs = Zc if Zc > MIN_DEPTH else math.nan
+            ul = cu + f * Xc / Zs
+            uv.append((ul, ul - f * b / Zs))
+            dul_dXc = f / Zs
+            dul_dZc = -f * Xc / (Zs * Zs)
+            dur_dZc = dul_dZc + f * b / (Zs * Zs)
+            p00, p01 = dul_dXc * s + dul_dZc * c, dul_dXc * -c + dul_dZc * s
+            p10, p11 = dul_dXc * s + dur_dZc * c, dul_dXc * -c + dur_dZc * s
+            dXc_dth = c * dx + s * dy - (s * r0 - c * r1)
+            dZc_dth = -s * dx + c * dy - (c * r0 + s * r1)
+            J_p.append(((p00, p01), (p10, p11)))
+            J_X.append(((-p00, -p01, dul_dXc * dXc_dth + dul_dZc * dZc_dth),
+                        (-p10, -p11, dul_dXc * dXc_dth + dur_dZc * dZc_dth)))
+        shape = p.shape[:-1]
+        return (np.array(uv).reshape(*shape, 2), np.array(J_X).reshape(*shape, 2, 3),
+                np.array(J_p).reshape(*shape, 2, 2))
 
     def _project_point(self, dx: float, dy: float, c: float, s: float) -> np.ndarray:
         """:meth:`project_columns` of one point (2,) without Jacobians, ``(dx, dy)`` its offset from the left optical

@@ -643,3 +643,147 @@ def test_project_few_points_equals_the_array_path(monkeypatch):
                 assert x.shape == y.shape and x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True)
             n_nan += bool(np.isnan(got[0]).any())
     assert n_nan > 100
+
+
+# ------------------------------------------------------------------ the whole frame, every replaced step swapped back
+def _frame_former(monkeypatch):
+    """Swap every step this pass replaced back to its former code (the references above and those of
+    tests/test_speedups_7.py), for :func:`test_frame_equals_the_former_pipeline`."""
+    from stablemarks import geometry
+    from stablemarks import pipeline as PL
+
+    from .test_speedups_7 import block_boundary_columns_reference, edge_depth_step_reference
+
+    def frame_reference(self, X):  # the former StereoCamera._frame: float() of each element
+        x, y, th = (float(v) for v in X)
+        c_th, s_th = math.cos(th), math.sin(th)
+        psi = (th + self.pan + math.pi) % (2.0 * math.pi) - math.pi
+        cx = x + (c_th * self.mount_x - s_th * self.mount_y)
+        cy = y + (s_th * self.mount_x + c_th * self.mount_y)
+        return cx, cy, psi, math.cos(psi), math.sin(psi)
+
+    def right_block_reference(prediction, disparity_right, row_margin=0.0, columns=None):
+        H, W = disparity_right.shape
+        c0, c1 = (0, W - 1) if columns is None else (max(0, int(columns[0])), min(W - 1, int(columns[1])))
+        if c1 < c0:
+            return 0, 0, np.zeros((0, 0), dtype=bool)
+        v0 = max(0, int(np.floor(prediction.v_top.min() - row_margin)))
+        v1 = min(H - 1, int(np.ceil(prediction.v_bottom.max() + row_margin)))
+        if v1 < v0:
+            return 0, 0, np.zeros((0, 0), dtype=bool)
+        return v0, c0, right_band_reference(
+            disparity_right[v0 : v1 + 1, c0 : c1 + 1], c0, v0, int(prediction.columns[0]), prediction.d,
+            prediction.sigma_d, prediction.v_top, prediction.v_bottom, float(prediction.gate), float(row_margin))
+
+    def robust_minimum_variance(cols, k, lo, hi):
+        got = robust_minimum_variance_reference(cols, k, lo, hi)
+        return got if got[0] else (0, np.nan, np.nan)
+
+    def dilate_reference(region, px):
+        import cv2
+
+        if px <= 0:
+            return region
+        return cv2.dilate(region.astype(np.uint8), np.ones((2 * px + 1, 2 * px + 1), np.uint8)).astype(bool)
+
+    monkeypatch.setattr(geometry.StereoCamera, "_frame", frame_reference)
+    monkeypatch.setattr(geometry, "_FEW_POINTS", 0)
+    monkeypatch.setattr(P, "predict_plane", predict_plane_reference)
+    monkeypatch.setattr(PL, "fit_plane", fit_plane_reference)
+    monkeypatch.setattr(P, "dilate", dilate_reference)
+    for name, ref in (("other_wall_gap", other_wall_gap_reference),
+                      ("_robust_minimum_variance", robust_minimum_variance),
+                      ("relative_error_model", relative_error_model_reference), ("_right_block", right_block_reference),
+                      ("edge_occluded", edge_occluded_reference), ("edge_depth_step", edge_depth_step_reference),
+                      ("_robust_scale", robust_scale_reference),
+                      ("_block_boundary_columns", block_boundary_columns_reference)):
+        monkeypatch.setattr(L, name, ref)
+
+
+def _frame_outputs(frames, config):
+    """Per frame: the model (plane_regions, run_front_end, select_landmarks from the true pose) and the EKF after
+    one association and update with the frame's kept pairs (its landmarks from the frame's selected candidates)."""
+    from stablemarks.estimation import JointEKF, NewLandmark
+    from stablemarks.pipeline import plane_regions, run_front_end, select_landmarks
+
+    from .conftest import COV_PRIOR
+
+    out = []
+    for _, _, left, right, camera, world_map, X in frames:
+        reg = plane_regions(camera, X, COV_PRIOR, world_map, config, left.shape)
+        model = select_landmarks(run_front_end(left, right, config, reg), camera, world_map, X, COV_PRIOR, config)
+        ekf = None
+        if model.selected:
+            ekf = JointEKF(config.camera(camera), X, COV_PRIOR, config.ekf)
+            ekf.add_landmarks([NewLandmark.wall(world_map[c.plane_id], c.s, c.edge) for c in model.selected],
+                              np.diag([c.sigma_s**2 for c in model.selected]))
+            pairs = model.front.kept_pairs
+            measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+            chosen = ekf.select_for_update(ekf.associate_joint(measured, 0.0))
+            ekf.update([(i, measured[j]) for i, j in chosen])
+        out.append((model, ekf))
+    return out
+
+
+def test_frame_equals_the_former_pipeline(scenario_frames, monkeypatch):
+    """Every scenario frame through the regions, the front end, the planes, the boundaries, the candidates and one EKF
+    update, with this pass's code and with every step it replaced swapped back: the same kept pairs, predictions,
+    fits and regions, boundaries, candidates (their relative model's Jacobian and own σ to 1e-9), selection and
+    reasons, and EKF state and covariance (to 1e-9: the landmarks' σ enter it)."""
+    config = Config()
+    new = _frame_outputs(scenario_frames, config)
+    _frame_former(monkeypatch)
+    old = _frame_outputs(scenario_frames, config)
+    monkeypatch.undo()
+    n_cands = n_ekf = 0
+    for (m1, e1), (m2, e2) in zip(new, old, strict=True):
+        assert np.array_equal(m1.front.kept, m2.front.kept)
+        assert len(m1.predictions) == len(m2.predictions)
+        for p1, p2 in zip(m1.predictions, m2.predictions, strict=True):
+            assert_same_prediction(p1, p2)
+        for f1, f2 in zip(m1.fits, m2.fits, strict=True):
+            assert type(f1) is type(f2) and bool(f1) == bool(f2)
+            if f1:
+                assert (f1.a, f1.b, f1.s0, f1.n_inliers, f1.chi2_dof) == (f2.a, f2.b, f2.s0, f2.n_inliers, f2.chi2_dof)
+                assert np.array_equal(f1.cov_R, f2.cov_R) and np.array_equal(f1.region, f2.region)
+        for pl1, pl2 in zip(m1.planes, m2.planes, strict=True):
+            assert np.array_equal(pl1.members, pl2.members) and pl1.searched == pl2.searched
+            assert [why for _, why in pl1.rejected_boundaries] == [why for _, why in pl2.rejected_boundaries]
+            for b1, b2 in zip(pl1.boundaries + [b for b, _ in pl1.rejected_boundaries if b is not None],
+                              pl2.boundaries + [b for b, _ in pl2.rejected_boundaries if b is not None], strict=True):
+                for name, x in b1.__dict__.items():
+                    y = b2.__dict__[name]
+                    if x is None or y is None:
+                        assert x is y, name
+                    elif isinstance(x, np.ndarray):
+                        assert np.array_equal(x, y, equal_nan=True), name
+                    else:
+                        assert x == y or (x != x and y != y), name
+        assert len(m1.candidates) == len(m2.candidates)
+        for c1, c2 in zip(m1.candidates, m2.candidates, strict=True):
+            assert_close_candidate(c1, c2)
+            assert (c1.selected, c1.reason) == (c2.selected, c2.reason)
+        n_cands += len(m1.candidates)
+        assert (e1 is None) == (e2 is None)
+        if e1 is not None:
+            assert np.allclose(e1.state, e2.state, rtol=1e-9, atol=1e-12)
+            assert np.allclose(e1.cov, e2.cov, rtol=1e-9, atol=1e-15)
+            n_ekf += 1
+    assert n_cands > 50 and n_ekf >= 4
+
+
+def assert_close_candidate(a, b) -> None:
+    """Two candidates have the same fields in the same order, of the same types, the same strings, flags and
+    integers, and the same numbers, arrays too — the relative model's (``shared_jacobian``, ``sigma_own``) to 1e-9
+    of their size (its 2×2 and dot products are summed left to right, NumPy's BLAS may fuse multiply-adds)."""
+    assert type(a) is type(b)
+    assert list(a.__dict__) == list(b.__dict__)
+    for name, x in a.__dict__.items():
+        y = b.__dict__[name]
+        assert type(x) is type(y), name
+        if name in ("shared_jacobian", "sigma_own") and x is not None:
+            assert np.allclose(x, y, rtol=1e-9, atol=1e-9 * np.nanmax(np.abs(y), initial=0.0), equal_nan=True), name
+        elif isinstance(x, np.ndarray):
+            assert np.array_equal(x, y, equal_nan=True), name
+        else:
+            assert x == y or (x != x and y != y), name

@@ -787,3 +787,30 @@ def assert_close_candidate(a, b) -> None:
             assert np.array_equal(x, y, equal_nan=True), name
         else:
             assert x == y or (x != x and y != y), name
+
+
+# ------------------------------------------------------------------ one column pair triangulated
+def test_triangulate_one_pair_equals_the_array_path():
+    """:meth:`StereoCamera.triangulate` of one column pair (Python numbers, NumPy scalars, 0-d arrays) with a pose and
+    a full column covariance against the array path it takes for a (1,) pair: the same point and covariance bit for
+    bit, NaN where the disparity is not positive."""
+    from stablemarks.geometry import StereoCamera
+
+    rng = np.random.default_rng(109)
+    n_nan = 0
+    for _ in range(3000):
+        cam = StereoCamera(f=float(rng.uniform(200, 900)), cu=float(rng.uniform(100, 500)),
+                           baseline=float(rng.uniform(0.05, 0.5)), mount_x=float(rng.normal(0, 0.2)),
+                           mount_y=float(rng.normal(0, 0.2)), pan=float(rng.uniform(-1, 1)))
+        X = np.array([rng.normal(0, 3), rng.normal(0, 3), rng.uniform(-np.pi, np.pi)])
+        ul = float(rng.uniform(0, 640))
+        ur = ul - float(rng.choice([rng.uniform(0.1, 60), 0.0, -rng.uniform(0, 5)]))
+        A = rng.normal(size=(2, 2))
+        cov = A @ A.T + float(rng.uniform(0, 1))
+        want_p, want_cov = cam.triangulate(np.array([ul]), np.array([ur]), X, cov_uv=cov[None])
+        for u in ((ul, ur), (np.float64(ul), np.float64(ur)), (np.array(ul), np.array(ur))):
+            p, c = cam.triangulate(*u, X, cov_uv=cov)
+            assert p.shape == (2,) and c.shape == (2, 2)
+            assert np.array_equal(p, want_p[0], equal_nan=True) and np.array_equal(c, want_cov[0], equal_nan=True)
+        n_nan += bool(np.isnan(want_p).any())
+    assert n_nan > 500

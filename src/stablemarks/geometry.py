@@ -396,6 +396,8 @@ class StereoCamera:
         """
         u_l = np.asarray(u_l, dtype=float)
         u_r = np.asarray(u_r, dtype=float)
+        if u_l.ndim == u_r.ndim == 0 and X is not None and cov_X is None and np.ndim(cov_uv) == 2:
+            return self._triangulate_one(float(u_l), float(u_r), X, np.asarray(cov_uv, dtype=float))
         d = u_l - u_r
         d = np.where(d > 0, d, np.nan)
         fb = self.f * self.baseline
@@ -436,6 +438,25 @@ class StereoCamera:
             J_p_X = self.triangulation_jacobian_pose(X, Xc, Zc)
             cov = cov + J_p_X @ np.asarray(cov_X, dtype=float) @ np.swapaxes(J_p_X, -1, -2)
         return p, cov
+
+    def _triangulate_one(self, u_l: float, u_r: float, X, cov_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`triangulate` of one column pair in the world with a full column covariance (a searched boundary):
+        the same element-wise operations on Python floats (squares as products, as NumPy's), the covariance by the
+        same matrix products, without the array code's ~30 operations on 0-d arrays."""
+        d = u_l - u_r
+        d = d if d > 0 else math.nan
+        fb = self.f * self.baseline
+        Zc = fb / d
+        Xc = (u_l - self.cu) * Zc / self.f
+        dZ_dur = fb / (d * d)
+        dZ_dul = -dZ_dur
+        dX_dul = Zc / self.f + (u_l - self.cu) * dZ_dul / self.f
+        dX_dur = (u_l - self.cu) * dZ_dur / self.f
+        cx, cy, _, c, s = self._frame(X)
+        J = np.array([[s * dX_dul + c * dZ_dul, s * dX_dur + c * dZ_dur],
+                      [-c * dX_dul + s * dZ_dul, -c * dX_dur + s * dZ_dur]])
+        p = np.array([cx + c * Zc + s * Xc, cy + s * Zc - c * Xc])
+        return p, J @ cov_uv @ np.swapaxes(J, -1, -2)
 
     def triangulation_jacobian_pose(self, X, Xc, Zc) -> np.ndarray:
         """``J_p_X`` (..., 2, 3): how a triangulated world point moves with the robot pose."""

@@ -210,18 +210,22 @@ class Map:
         if plane_id not in cache:
             ids = [p.id for p in self.planes]
             exclude = [ids.index(plane_id)] if plane_id in ids else []
-            cache[plane_id] = (exclude, kept_walls(len(ids), exclude))
+            kept = kept_walls(len(ids), exclude)
+            kept.setflags(write=False)
+            cache[plane_id] = (exclude, kept)
         exclude, kept = cache[plane_id]
         return self._segments, list(exclude), kept
 
     @cached_property
     def _segments(self) -> np.ndarray:
+        """:meth:`segments`, made once (read-only)."""
         walls = self.segments()
         walls.setflags(write=False)
         return walls
 
     @cached_property
     def _others(self) -> dict[str, tuple[list[int], np.ndarray]]:
+        """:meth:`others`' answers by wall id, made on first request."""
         return {}
 
     def to_dict(self) -> dict:

@@ -814,3 +814,144 @@ def test_triangulate_one_pair_equals_the_array_path():
             assert np.array_equal(p, want_p[0], equal_nan=True) and np.array_equal(c, want_cov[0], equal_nan=True)
         n_nan += bool(np.isnan(want_p).any())
     assert n_nan > 500
+
+
+# ------------------------------------------------------------------ the boundary search
+def search_boundary_reference(
+    camera,
+    fit,
+    edge: str,
+    disparity_right,
+    members_u,
+    config=L.LandmarkConfig(),
+    plane_config=P.PlaneConfig(),
+    window_px=15.0,
+    border_sigma_px=None,
+    bridge_px=None,
+) -> object:
+    """The former :func:`~stablemarks.landmarks.search_boundary`: :func:`~stablemarks.landmarks.robust_rows` and
+    :func:`~stablemarks.landmarks.minimum_variance_column` of each image's rows, the snap onto a member pair and the
+    column covariance in NumPy."""
+    w = L.boundary_window(config, window_px)
+    pred = fit.prediction
+    plane = fit.plane
+    e = pred.edges[edge]
+    X = fit.X
+    u_inner = L._inner_columns(camera, X, plane, edge)
+    u_b = np.zeros(2)
+    var_b = np.zeros(2)
+    rows_used = 0
+    snapped = False
+    H, W = fit.region.shape
+    v0, v1, _ = fit.box[0].indices(H)
+    regions = [(fit.region[v0:max(v0, v1)], v0, 0), None]
+    if disparity_right is not None and np.all(np.isfinite(e.u)):
+        lo_r, hi_r = e.window(1, config.search_sigma)
+        rv0, rc0, block = L._right_block(pred, disparity_right, plane_config.row_margin_px,
+                                       (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
+        regions[1] = (block, rv0, rc0)
+    outwards = [-1 if e.u[img] < u_inner[img] else 1 for img in (0, 1)]
+    right_found = True
+    for img in (0, 1):
+        outward = outwards[img]
+        lo, hi = e.window(img, config.search_sigma)
+        if img == 0:  # the left region exists only inside the plane's predicted window
+            lo, hi = max(lo, pred.window[0]), min(hi, pred.window[1])
+        if regions[img] is None:
+            rows, cols = np.zeros(0, int), np.zeros(0)
+        else:
+            block, bv0, bu0 = regions[img]
+            rows, cols = L._block_boundary_columns(block, bv0, bu0, disparity_right.shape[1] if img else W, lo, hi,
+                                                 outward, int(w // 2) if bridge_px is None else int(bridge_px))
+            keep = L.robust_rows(cols, config.row_outlier_mad)
+            rows, cols = rows[keep], cols[keep]
+        if len(rows) < config.min_boundary_rows:
+            if img == 0:
+                return None
+            right_found = False
+            continue
+        m, var = L.minimum_variance_column(cols, lo, hi)
+        if img == 0:
+            rows_used = len(rows)
+        u_b[img] = m
+        var_b[img] = var + camera.sigma_img**2
+    if len(members_u):
+        beyond = (members_u - u_b) * np.asarray(outwards)
+        near = (beyond[:, 0] > 0) & (beyond[:, 0] <= w)
+        if right_found:
+            near &= np.abs(beyond[:, 1]) <= w
+        if np.any(near):
+            k = np.flatnonzero(near)[np.argmax(beyond[near, 0])]
+            u_b[:] = members_u[k]
+            snapped = True
+            var_b[:] = camera.sigma_img**2
+            right_found = True
+    if right_found and not snapped:
+        d_here, _ = pred.disparity_at(u_b[0])
+        if abs(u_b[0] - u_b[1] - float(d_here)) > w / 2.0:
+            right_found = False
+    if not right_found:
+        d_here, _ = pred.disparity_at(u_b[0])
+        u_b[1] = u_b[0] - float(d_here)
+        var_b[1] = config.fallback_sigma_px**2
+    border = border_sigma_px if isinstance(border_sigma_px, tuple) else (border_sigma_px, border_sigma_px)
+    border = border[0] if snapped else border[1]
+    var_w = w**2 / 12.0 if border is None else float(border) ** 2
+    cov_uv = np.diag(var_b) + var_w
+    sigma_u = np.sqrt(np.diag(cov_uv))
+    P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
+    if not np.all(np.isfinite(P)):
+        d_here, _ = pred.disparity_at(u_b[0])
+        u_b[1] = u_b[0] - float(d_here)
+        P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
+    P_hat, cov_hat = fit.fuse_point(P, cov)
+    t = L._inward(plane, edge)
+    sigma_along = float(np.sqrt(t @ cov_hat @ t))
+    sigma_m = np.nan
+    if config.filter_boundary_sigma == "measured":
+        _, cov_m = camera.triangulate(u_b[0], u_b[1], X, cov_uv=np.diag(var_b))
+        _, cov_m = fit.fuse_point(P, cov_m)
+        sigma_m = float(np.sqrt(t @ cov_m @ t))
+    return L.Boundary(plane.id, edge, u_b, sigma_u, P_hat, cov_hat, sigma_along, snapped, rows_used, t, sigma_m,
+                    cov_uv, np.diag(var_b) if config.filter_boundary_sigma == "measured" else None)
+
+
+
+def test_search_boundary_equals_the_reference(scenario_frames, scenario_models):
+    """Both free edges of every fitted wall of every scenario frame, with the plane's members, none, a random half and
+    the members moved by a few pixels (snapping onto another pair, or none), bridging 2 px or the window, both
+    boundary variances and border allowances: the same boundary bit for bit, or none alike."""
+    config = Config()
+    rng = np.random.default_rng(113)
+    n = n_snapped = 0
+    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
+        camera = config.camera(frame[4])
+        pairs = front.kept_pairs
+        for plane in model.planes:
+            idx = np.flatnonzero(plane.members)
+            mu = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
+            variants = [mu, np.zeros((0, 2)), mu[rng.random(len(mu)) < 0.5], mu + rng.normal(0, 4, mu.shape)]
+            for edge in plane.fit.plane.free_edges:
+                if not np.all(np.isfinite(plane.fit.prediction.edges[edge].u)):
+                    continue
+                for members_u in variants:
+                    for lc, border, bridge in ((config.landmarks, (0.25, None), None),
+                                               (L.LandmarkConfig(filter_boundary_sigma="measured"), None, 2),
+                                               (config.landmarks, 0.5, 30)):
+                        args = (camera, plane.fit, edge, front.disparity.right, members_u, lc, config.planes, 15.0,
+                                border, bridge)
+                        got, want = L.search_boundary(*args), search_boundary_reference(*args)
+                        assert (got is None) == (want is None)
+                        if want is None:
+                            continue
+                        for name, x in want.__dict__.items():
+                            y = got.__dict__[name]
+                            if x is None or y is None:
+                                assert x is y, name
+                            elif isinstance(x, np.ndarray):
+                                assert x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True), name
+                            else:
+                                assert type(x) is type(y) and (x == y or (x != x and y != y)), name
+                        n += 1
+                        n_snapped += want.snapped
+    assert n > 100 and 20 < n_snapped < n - 20

@@ -662,12 +662,14 @@ def search_boundary(
     # disparity puts the edge metres off the wall (hall, screens at 10 m: 3–6 px off the plane's disparity,
     # 0.1 m along it). The pair's right line must lie within one window of the right border too.
     if len(members_u):
-        beyond = (members_u - u_b) * np.asarray(outwards)
-        near = (beyond[:, 0] > 0) & (beyond[:, 0] <= w)
-        if right_found:
-            near &= np.abs(beyond[:, 1]) <= w
-        if np.any(near):
-            k = np.flatnonzero(near)[np.argmax(beyond[near, 0])]
+        # the member pair farthest beyond the left border within one window (first of equals; on Python floats)
+        (ub0, ub1), (o0, o1) = u_b.tolist(), outwards
+        k, farthest = -1, 0.0
+        for q, (m0, m1) in enumerate(members_u.tolist()):
+            b0 = (m0 - ub0) * o0
+            if 0 < b0 <= w and (not right_found or abs((m1 - ub1) * o1) <= w) and (k < 0 or b0 > farthest):
+                k, farthest = q, b0
+        if k >= 0:
             u_b[:] = members_u[k]
             snapped = True
             # the edge is now that segment pair's lines, each good to the line noise: the spread of the
@@ -693,8 +695,9 @@ def search_boundary(
     border = border_sigma_px if isinstance(border_sigma_px, tuple) else (border_sigma_px, border_sigma_px)
     border = border[0] if snapped else border[1]
     var_w = w**2 / 12.0 if border is None else float(border) ** 2
-    cov_uv = np.diag(var_b) + var_w
-    sigma_u = np.sqrt(np.diag(cov_uv))
+    vb0, vb1 = var_b.tolist()
+    cov_uv = np.array([[vb0 + var_w, var_w], [var_w, vb1 + var_w]])  # np.diag(var_b) + var_w
+    sigma_u = np.sqrt(np.array([vb0 + var_w, vb1 + var_w]))
     P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
     if not np.all(np.isfinite(P)):
         # non-positive disparity from two independent searches: intersect the left ray with the plane

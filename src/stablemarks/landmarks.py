@@ -30,8 +30,9 @@ from numba import njit
 
 from .errors import InputError, expected
 from .geometry import StereoCamera
-from .maps import Map, ray_distances, segments_block
-from .planes import PlaneConfig, PlaneFit, median, plane_members
+from .maps import Map, nearest_crossing, sight_blocked
+from .maps import ray_distances as ray_distances  # re-exported: the former ray casts' references read it here
+from .planes import PlaneConfig, PlaneFit, fuse_one, median, plane_members
 
 REASON_NEAR_BOUNDARY = "near boundary"
 REASON_LENGTH = "low length similarity"
@@ -353,8 +354,8 @@ def _block_row_ends(block, v0, u0, c0, c1, outward, max_hole):  # pragma: no cov
             if 0 <= c < w and block[i, c]:
                 j += 1
                 continue
-            q = j + 1  # the next region pixel after the hole that starts at j
-            while q < n:
+            q = j + 1  # the next region pixel after the hole that starts at j (not looked for beyond the widest
+            while q < n and q - j <= max_hole:  # hole crossed: the run ends there whatever follows)
                 c = first + step * q - u0
                 if 0 <= c < w and block[i, c]:
                     break
@@ -397,6 +398,120 @@ def minimum_variance_column(cols: np.ndarray, lo: float, hi: float) -> tuple[flo
     return m, float(((cols - m) ** 2).mean())
 
 
+@njit(cache=True)
+def _pairwise_block(a, lo, n):  # pragma: no cover - numba
+    """NumPy's pairwise summation of ``a[lo : lo + n]`` for ``n <= 128``: below 8 elements left to right from 0,
+    else in eight interleaved partial sums combined pairwise, the rest added after."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        q = lo + i
+        r0 += a[q]
+        r1 += a[q + 1]
+        r2 += a[q + 2]
+        r3 += a[q + 3]
+        r4 += a[q + 4]
+        r5 += a[q + 5]
+        r6 += a[q + 6]
+        r7 += a[q + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a, lo, n):  # pragma: no cover - numba
+    """The sum of ``a[lo : lo + n]`` (contiguous float64) as NumPy's ``add.reduce`` sums it: blocks of at most 128
+    (:func:`_pairwise_block`), a longer stretch split in two halves (the first a multiple of 8) summed apart and
+    added: the same value bit for bit. The recursion unrolled on a stack (a stretch's start, length, and the sum
+    of its first half once known)."""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    starts = np.empty(64, np.int64)
+    lengths = np.empty(64, np.int64)
+    firsts = np.empty(64)
+    halves = np.zeros(64, np.int64)  # 0: neither half summed, 1: the first
+    starts[0], lengths[0], sp = lo, n, 1
+    while True:
+        top = sp - 1
+        m = lengths[top]
+        if m > 128:  # split: its first half first (a stretch on top has neither half summed yet)
+            h = m // 2
+            h -= h % 8
+            starts[sp], lengths[sp], halves[sp] = starts[top], h, 0
+            sp += 1
+            continue
+        val = _pairwise_block(a, starts[top], m)
+        sp -= 1
+        # hand the sum up: the first half of its parent waits for the second, the second completes the parent
+        while sp > 0:
+            parent = sp - 1
+            h = lengths[parent] // 2
+            h -= h % 8
+            if halves[parent] == 0:
+                firsts[parent], halves[parent] = val, 1
+                starts[sp], lengths[sp], halves[sp] = starts[parent] + h, lengths[parent] - h, 0
+                sp += 1
+                break
+            val = firsts[parent] + val
+            sp -= 1
+        if sp == 0:
+            return val
+
+
+@njit(cache=True)
+def _sorted_median(x):  # pragma: no cover - numba
+    """:func:`~stablemarks.planes.median` of a 1-D array (at least one number) by sorting a copy: the same element, or
+    the same two averaged."""
+    p = np.sort(x)
+    k = len(p) // 2
+    return p[k] if len(p) % 2 else (p[k - 1] + p[k]) / 2
+
+
+@njit(cache=True)
+def _robust_minimum_variance(cols, k, lo, hi):  # pragma: no cover - numba
+    """:func:`robust_rows` of the boundary columns ``cols`` (``k`` robust σ), then :func:`minimum_variance_column`
+    of those kept in ``[lo, hi]``: ``(number kept, column, variance)``, ``(0, NaN, NaN)`` when none. The same
+    medians, means (:func:`_pairwise_sum`: NumPy's summation order) and first least variance, in one call: the
+    two functions' NumPy calls cost ~20 µs per image and edge."""
+    n = cols.shape[0]
+    if n == 0:
+        return 0, np.nan, np.nan
+    med = _sorted_median(cols)
+    dev = np.abs(cols - med)
+    scale = max(1.0, 1.4826 * _sorted_median(dev))
+    kept = cols[dev <= k * scale]
+    m = kept.shape[0]
+    if m == 0:
+        return 0, np.nan, np.nan
+    mean = _pairwise_sum(kept, 0, m) / m
+    if not lo <= mean <= hi:
+        c0, c1 = np.ceil(lo), np.floor(hi) + 1.0  # the candidates np.arange(c0, c1): whole numbers
+        n_cand = int(c1 - c0) if c1 > c0 else 0
+        sq = np.empty(m)
+        best_var = np.inf
+        if n_cand == 0:
+            mean = 0.5 * (lo + hi)
+        for i in range(n_cand):
+            cand = c0 + i
+            for q in range(m):
+                sq[q] = (kept[q] - cand) * (kept[q] - cand)
+            v = _pairwise_sum(sq, 0, m) / m
+            if v < best_var or i == 0:
+                best_var, mean = v, cand
+    sq = (kept - mean) * (kept - mean)
+    return m, mean, _pairwise_sum(sq, 0, m) / m
+
+
 def right_region(prediction, disparity_right: np.ndarray, row_margin: float = 0.0,
                  columns: tuple[int, int] | None = None) -> np.ndarray:
     """The plane's pixels in the right image: right-reference disparities inside the plane's band.
@@ -423,19 +538,20 @@ def _right_block(prediction, disparity_right: np.ndarray, row_margin: float = 0.
     v1 = min(H - 1, int(np.ceil(prediction.v_bottom.max() + row_margin)))
     if v1 < v0:
         return 0, 0, np.zeros((0, 0), dtype=bool)
-    return v0, c0, _right_band(
-        disparity_right[v0 : v1 + 1, c0 : c1 + 1], c0, v0, int(prediction.columns[0]), prediction.d,
-        prediction.sigma_d, prediction.v_top, prediction.v_bottom, float(prediction.gate), float(row_margin))
+    return v0, c0, _right_band(disparity_right[v0 : v1 + 1, c0 : c1 + 1], c0, v0, int(prediction.columns[0]),
+                               prediction.band_table, float(prediction.gate), float(row_margin))
 
 
 @njit(cache=True)
-def _right_band(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):  # pragma: no cover - numba
+def _right_band(sub, c0, v0, u0, table, gate, row_margin):  # pragma: no cover - numba
     """:func:`right_region` on the box ``sub`` (h, w) of right disparities at rows ``v0…``, columns ``c0…``,
-    for a prediction whose window's columns are ``u0, u0 + 1, …`` (consecutive): the left column
-    ``u = x + d`` must lie in the window; the band there is interpolated as ``np.interp`` does. The rows of the
-    band are interpolated only for pixels whose disparity is in it (the same mask, fewer operations)."""
+    for a prediction whose window's columns are ``u0, u0 + 1, …`` (consecutive), ``table`` its
+    :attr:`~stablemarks.planes.PlanePrediction.band_table`: the left column ``u = x + d`` must lie in the window;
+    the band there is interpolated as ``np.interp`` does (``(y[j+1] − y[j]) · frac + y[j]``, the differences
+    from the table). The rows of the band are interpolated only for pixels whose disparity is in it (the same
+    mask, fewer operations)."""
     h, w = sub.shape
-    K = len(d)
+    K = table.shape[0]
     u_last = u0 + K - 1
     out = np.zeros((h, w), dtype=np.bool_)
     for i in range(h):
@@ -447,16 +563,16 @@ def _right_band(sub, c0, v0, u0, d, sigma_d, v_top, v_bottom, gate, row_margin):
                 continue
             j = int(u - u0)
             if j == K - 1:
-                out[i, k] = (abs(disp - d[j]) <= gate * sigma_d[j] and v >= v_top[j] - row_margin
-                             and v <= v_bottom[j] + row_margin)
+                out[i, k] = (abs(disp - table[j, 0]) <= gate * table[j, 2] and v >= table[j, 4] - row_margin
+                             and v <= table[j, 6] + row_margin)
                 continue
             frac = u - float(u0 + j)
-            dp = (d[j + 1] - d[j]) * frac + d[j]
-            sp = (sigma_d[j + 1] - sigma_d[j]) * frac + sigma_d[j]
+            dp = table[j, 1] * frac + table[j, 0]
+            sp = table[j, 3] * frac + table[j, 2]
             if not abs(disp - dp) <= gate * sp:
                 continue
-            vt = (v_top[j + 1] - v_top[j]) * frac + v_top[j]
-            vb = (v_bottom[j + 1] - v_bottom[j]) * frac + v_bottom[j]
+            vt = table[j, 5] * frac + table[j, 4]
+            vb = table[j, 7] * frac + table[j, 6]
             out[i, k] = v >= vt - row_margin and v <= vb + row_margin
     return out
 
@@ -523,21 +639,20 @@ def search_boundary(
         if img == 0:  # the left region exists only inside the plane's predicted window
             lo, hi = max(lo, pred.window[0]), min(hi, pred.window[1])
         if regions[img] is None:
-            rows, cols = np.zeros(0, int), np.zeros(0)
+            n_rows = 0
         else:
             block, bv0, bu0 = regions[img]
-            rows, cols = _block_boundary_columns(block, bv0, bu0, disparity_right.shape[1] if img else W, lo, hi,
-                                                 outward, int(w // 2) if bridge_px is None else int(bridge_px))
-            keep = robust_rows(cols, config.row_outlier_mad)
-            rows, cols = rows[keep], cols[keep]
-        if len(rows) < config.min_boundary_rows:
+            _, cols = _block_boundary_columns(block, bv0, bu0, disparity_right.shape[1] if img else W, lo, hi,
+                                              outward, int(w // 2) if bridge_px is None else int(bridge_px))
+            # robust_rows, then minimum_variance_column of the rows kept, in one numba call
+            n_rows, m, var = _robust_minimum_variance(cols, float(config.row_outlier_mad), float(lo), float(hi))
+        if n_rows < config.min_boundary_rows:
             if img == 0:
                 return None
             right_found = False
             continue
-        m, var = minimum_variance_column(cols, lo, hi)
         if img == 0:
-            rows_used = len(rows)
+            rows_used = n_rows
         u_b[img] = m
         var_b[img] = var + camera.sigma_img**2
     # A boundary placed inside the outermost segment of the region is moved to that segment. Block matching
@@ -547,12 +662,14 @@ def search_boundary(
     # disparity puts the edge metres off the wall (hall, screens at 10 m: 3–6 px off the plane's disparity,
     # 0.1 m along it). The pair's right line must lie within one window of the right border too.
     if len(members_u):
-        beyond = (members_u - u_b) * np.asarray(outwards)
-        near = (beyond[:, 0] > 0) & (beyond[:, 0] <= w)
-        if right_found:
-            near &= np.abs(beyond[:, 1]) <= w
-        if np.any(near):
-            k = np.flatnonzero(near)[np.argmax(beyond[near, 0])]
+        # the member pair farthest beyond the left border within one window (first of equals; on Python floats)
+        (ub0, ub1), (o0, o1) = u_b.tolist(), outwards
+        k, farthest = -1, 0.0
+        for q, (m0, m1) in enumerate(members_u.tolist()):
+            b0 = (m0 - ub0) * o0
+            if 0 < b0 <= w and (not right_found or abs((m1 - ub1) * o1) <= w) and (k < 0 or b0 > farthest):
+                k, farthest = q, b0
+        if k >= 0:
             u_b[:] = members_u[k]
             snapped = True
             # the edge is now that segment pair's lines, each good to the line noise: the spread of the
@@ -578,8 +695,9 @@ def search_boundary(
     border = border_sigma_px if isinstance(border_sigma_px, tuple) else (border_sigma_px, border_sigma_px)
     border = border[0] if snapped else border[1]
     var_w = w**2 / 12.0 if border is None else float(border) ** 2
-    cov_uv = np.diag(var_b) + var_w
-    sigma_u = np.sqrt(np.diag(cov_uv))
+    vb0, vb1 = var_b.tolist()
+    cov_uv = np.array([[vb0 + var_w, var_w], [var_w, vb1 + var_w]])  # np.diag(var_b) + var_w
+    sigma_u = np.sqrt(np.array([vb0 + var_w, vb1 + var_w]))
     P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
     if not np.all(np.isfinite(P)):
         # non-positive disparity from two independent searches: intersect the left ray with the plane
@@ -661,13 +779,14 @@ def model_features(
     c_l = [np.inf] * len(k) if contrast is None else np.asarray(contrast, dtype=float)[k].tolist()
     so_l = [np.nan] * len(k) if J_shared is None else sigma_own.tolist()
     k_l = k.tolist()
+    P_model = P_edge + d_p[:, None] * t  # Eq 15, every candidate's (row j: P_edge + d_p[j] t)
+    cov_model = var_s[:, None, None] * tt  # Eq 17: rank 1 along the wall
     out = []
     for rank, j in enumerate(np.argsort(d_p, kind="stable").tolist()):
         out.append(_new_candidate(dict(
             plane_id=plane.id, plane_label=plane.label, index=rank + 1, pair=k_l[j], edge=edge, s=d_l[j],
             sigma_b=boundary.sigma_along, sigma_f=sf_l[j],
-            P=P_edge + d_p[j] * t,  # Eq 15
-            cov=var_s[j] * tt,  # Eq 17: rank 1 along the wall
+            P=P_model[j], cov=cov_model[j],
             z_low=zl_l[j], z_high=zh_l[j], length_similarity=ls_l[j], u_left=ul_l[j], u_right=ur_l[j],
             v_top=vt_l[j], v_bottom=vb_l[j], selected=False, reason="",
             P_observed=P_hat[j], cov_observed=cov_hat[j], contrast=c_l[j],
@@ -707,45 +826,122 @@ def relative_error_model(camera: StereoCamera, fit: PlaneFit, boundary: Boundary
     cov_ub = boundary.cov_uv_measured if measured and boundary.cov_uv_measured is not None else boundary.cov_uv
     if cov_ub is None:
         return None, None, None
-    X = fit.X
-    n_f = len(np.atleast_1d(u_left))
     u_f = np.stack([np.asarray(u_left, dtype=float).ravel(), np.asarray(u_right, dtype=float).ravel()], axis=-1)
-    steps = np.array([[0.0, 0.0], [step_px, 0.0], [-step_px, 0.0], [0.0, step_px], [0.0, -step_px]])  # (5, 2)
-    uf = u_f[None, :, :] + steps[:, None, :]  # (5, n, 2): base, ±u_l, ±u_r
-    ub = np.asarray(boundary.u, dtype=float)[None, :] + steps  # (5, 2)
-    P_f, cov_f = camera.triangulate(uf[..., 0], uf[..., 1], X)  # (5, n, 2)
-    P_b, cov_b = camera.triangulate(ub[:, 0], ub[:, 1], X, cov_uv=cov_ub)  # (5, 2)
-    nrm = fit.plane.normal
-    # the base line on: every column variant, and the base columns moved ∓h along the normal (a ± h)
-    hf = np.stack([P_f[0] - step_line * nrm, P_f[0] + step_line * nrm])  # (2, n, 2)
-    hb = np.stack([P_b[0] - step_line * nrm, P_b[0] + step_line * nrm])  # (2, 2)
-    cov_hf = np.broadcast_to(cov_f[0], hf.shape + (2,))
-    cov_hb = np.broadcast_to(cov_b[0], hb.shape + (2,))
-    F, _ = fit.fuse_point(np.concatenate([P_f, hf]), np.concatenate([cov_f, cov_hf]))
-    B, _ = fit.fuse_point(np.concatenate([P_b, hb]), np.concatenate([cov_b, cov_hb]))
-    F[5] += step_line * nrm
-    F[6] -= step_line * nrm
-    B[5] += step_line * nrm
-    B[6] -= step_line * nrm
-    # the slope's two steps: the line turned to b ± h (PlaneFit.fuse_point's ``b``, without copies of the fit)
-    slope = []
-    for h in (step_line, -step_line):
-        slope.append((fit.fuse_point(P_f[0], cov_f[0], b=fit.b + h)[0]
-                      - fit.fuse_point(P_b[0], cov_b[0], b=fit.b + h)[0]) @ t)
-    base_b = B[0]
-    J = np.empty((n_f, 4))
-    J[:, 0] = ((F[5] - B[5]) @ t - (F[6] - B[6]) @ t) / (2 * step_line)
-    J[:, 1] = (slope[0] - slope[1]) / (2 * step_line)
-    J[:, 2] = ((F[0] - B[1]) @ t - (F[0] - B[2]) @ t) / (2 * step_px)
-    J[:, 3] = ((F[0] - B[3]) @ t - (F[0] - B[4]) @ t) / (2 * step_px)
-    own = (((F[1] - base_b) @ t - (F[2] - base_b) @ t) / (2 * step_px) * camera.sigma_img) ** 2
-    own += (((F[3] - base_b) @ t - (F[4] - base_b) @ t) / (2 * step_px) * camera.sigma_img) ** 2
+    cx, cy, _, c, s = camera._frame(fit.X)
+    plane = fit.plane
+    J, own = _relative_model(u_f, np.asarray(boundary.u, dtype=float), np.asarray(cov_ub, dtype=float),
+                             float(camera.f), float(camera.baseline), float(camera.cu), float(camera.sigma_img), cx, cy,
+                             c, s, plane.P1, plane.direction, plane.normal, float(fit.a), float(fit.b), float(fit.s0),
+                             np.asarray(fit.cov_R, dtype=float), np.asarray(t, dtype=float), float(step_px),
+                             float(step_line))
     cov_shared = np.zeros((4, 4))
     cov_shared[:2, :2] = fit.cov_R
     cov_shared[2:, 2:] = cov_ub
     if not (np.all(np.isfinite(J)) and np.all(np.isfinite(own))):
         return None, None, None
     return J, np.sqrt(own), cov_shared
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _triangulate_one(ul, ur, f, baseline, cu, cx, cy, c, s):  # pragma: no cover - numba
+    """:meth:`~stablemarks.geometry.StereoCamera.triangulate` of one column pair with a pose (its left optical centre
+    ``(cx, cy)``, heading ``(c, s)``): the world point and the Jacobian ``∂(x, y)/∂(u_l, u_r)``, ``(p0, p1), (J00,
+    J01, J10, J11)``, by the same element-wise operations (NaN where ``u_l − u_r <= 0``)."""
+    d = ul - ur
+    d = d if d > 0 else np.nan
+    fb = f * baseline
+    Zc = fb / d
+    Xc = (ul - cu) * Zc / f
+    dZ_dur = fb / (d * d)
+    dZ_dul = -dZ_dur
+    dX_dul = Zc / f + (ul - cu) * dZ_dul / f
+    dX_dur = (ul - cu) * dZ_dur / f
+    return ((cx + c * Zc + s * Xc, cy + s * Zc - c * Xc),
+            (s * dX_dul + c * dZ_dul, s * dX_dur + c * dZ_dur, -c * dX_dul + s * dZ_dul, -c * dX_dur + s * dZ_dur))
+
+
+@njit(cache=True, error_model="numpy")
+def _relative_model(u_f, u_b, cov_ub, f, baseline, cu, sigma_img, cx, cy, c, s, P1, tw, nrm, a, b, s0, cov_R, t,
+                    step_px, step_line):  # pragma: no cover - numba
+    """:func:`relative_error_model`'s central differences for features at columns ``u_f`` (n, 2) from the boundary at
+    ``u_b`` (2,) with column covariance ``cov_ub`` (2, 2): ``J`` (n, 4) and ``own`` (n,) (the variance of ``d`` from
+    the feature's own columns). Per feature and step what the former NumPy code computed for all at once:
+    triangulated (:func:`_triangulate_one`; the feature's covariance ``σ_img² J Jᵀ``, the boundary's ``J Σ_ub
+    Jᵀ``), fused with the fitted line (:func:`~stablemarks.planes.fuse_one`), the offset's step as the point moved
+    along the normal and back, the slope's as the line turned; the distances along ``t``. The 2×2 products and the
+    dot products are summed left to right (NumPy's may fuse multiply-adds: the values may differ in the last bits,
+    the derivatives to about 1e-12 of their size); ~130 µs of NumPy calls on tiny arrays per plane before."""
+    n = u_f.shape[0]
+    steps = ((0.0, 0.0), (step_px, 0.0), (-step_px, 0.0), (0.0, step_px), (0.0, -step_px))
+    s2 = sigma_img * sigma_img
+
+    def along(x0, x1):  # (x0, x1) · t
+        return x0 * t[0] + x1 * t[1]
+
+    # the boundary: its five column variants fused with the line (B[0 … 4]), the base moved ∓h along the normal
+    # (B[5], B[6]), and the base fused with the line turned to b ± h (Bs[0], Bs[1])
+    B = np.empty((7, 2))
+    Bs = np.empty((2, 2))
+    base_cov = (0.0, 0.0, 0.0, 0.0)
+    base_p = (0.0, 0.0)
+    for k in range(5):
+        p, (j00, j01, j10, j11) = _triangulate_one(u_b[0] + steps[k][0], u_b[1] + steps[k][1], f, baseline, cu, cx,
+                                                   cy, c, s)
+        m00 = j00 * cov_ub[0, 0] + j01 * cov_ub[1, 0]  # J Σ_ub, then (J Σ_ub) Jᵀ
+        m01 = j00 * cov_ub[0, 1] + j01 * cov_ub[1, 1]
+        m10 = j10 * cov_ub[0, 0] + j11 * cov_ub[1, 0]
+        m11 = j10 * cov_ub[0, 1] + j11 * cov_ub[1, 1]
+        cov = (m00 * j00 + m01 * j01, m00 * j10 + m01 * j11, m10 * j00 + m11 * j01, m10 * j10 + m11 * j11)
+        (B[k, 0], B[k, 1]), _ = fuse_one(p[0], p[1], cov[0], cov[1], cov[2], cov[3], P1, tw, nrm, a, b, s0, cov_R)
+        if k == 0:
+            base_p, base_cov = p, cov
+    _shifted(B, base_p, base_cov, P1, tw, nrm, a, b, s0, cov_R, step_line)
+    for i, h in enumerate((step_line, -step_line)):
+        (Bs[i, 0], Bs[i, 1]), _ = fuse_one(base_p[0], base_p[1], base_cov[0], base_cov[1], base_cov[2], base_cov[3],
+                                           P1, tw, nrm, a, b + h, s0, cov_R)
+    J = np.empty((n, 4))
+    own = np.empty(n)
+    F = np.empty((7, 2))
+    Fs = np.empty((2, 2))
+    for i in range(n):
+        for k in range(5):
+            p, (j00, j01, j10, j11) = _triangulate_one(u_f[i, 0] + steps[k][0], u_f[i, 1] + steps[k][1], f, baseline,
+                                                       cu, cx, cy, c, s)
+            cov = ((s2 * j00) * j00 + (s2 * j01) * j01, (s2 * j00) * j10 + (s2 * j01) * j11,
+                   (s2 * j10) * j00 + (s2 * j11) * j01, (s2 * j10) * j10 + (s2 * j11) * j11)
+            (F[k, 0], F[k, 1]), _ = fuse_one(p[0], p[1], cov[0], cov[1], cov[2], cov[3], P1, tw, nrm, a, b, s0, cov_R)
+            if k == 0:
+                base_p, base_cov = p, cov
+        _shifted(F, base_p, base_cov, P1, tw, nrm, a, b, s0, cov_R, step_line)
+        for q, h in enumerate((step_line, -step_line)):
+            (Fs[q, 0], Fs[q, 1]), _ = fuse_one(base_p[0], base_p[1], base_cov[0], base_cov[1], base_cov[2],
+                                               base_cov[3], P1, tw, nrm, a, b + h, s0, cov_R)
+
+        J[i, 0] = (along(F[5, 0] - B[5, 0], F[5, 1] - B[5, 1]) - along(F[6, 0] - B[6, 0], F[6, 1] - B[6, 1])) / (
+            2 * step_line)
+        J[i, 1] = (along(Fs[0, 0] - Bs[0, 0], Fs[0, 1] - Bs[0, 1]) - along(Fs[1, 0] - Bs[1, 0], Fs[1, 1] - Bs[1, 1])
+                   ) / (2 * step_line)
+        J[i, 2] = (along(F[0, 0] - B[1, 0], F[0, 1] - B[1, 1]) - along(F[0, 0] - B[2, 0], F[0, 1] - B[2, 1])) / (
+            2 * step_px)
+        J[i, 3] = (along(F[0, 0] - B[3, 0], F[0, 1] - B[3, 1]) - along(F[0, 0] - B[4, 0], F[0, 1] - B[4, 1])) / (
+            2 * step_px)
+        ol = (along(F[1, 0] - B[0, 0], F[1, 1] - B[0, 1]) - along(F[2, 0] - B[0, 0], F[2, 1] - B[0, 1])) / (
+            2 * step_px) * sigma_img
+        orr = (along(F[3, 0] - B[0, 0], F[3, 1] - B[0, 1]) - along(F[4, 0] - B[0, 0], F[4, 1] - B[0, 1])) / (
+            2 * step_px) * sigma_img
+        own[i] = ol * ol + orr * orr
+    return J, own
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _shifted(out, p, cov, P1, tw, nrm, a, b, s0, cov_R, h):  # pragma: no cover - numba
+    """Rows 5 and 6 of :func:`_relative_model`'s fused points: the base point ``p`` (covariance ``cov``) moved by
+    ``∓h`` along the normal, fused with the line, and moved back (the line's offset ``a ± h``)."""
+    for row, sign in ((5, -1.0), (6, 1.0)):
+        (x0, x1), _ = fuse_one(p[0] + sign * h * nrm[0], p[1] + sign * h * nrm[1], cov[0], cov[1], cov[2], cov[3],
+                               P1, tw, nrm, a, b, s0, cov_R)
+        out[row, 0] = x0 - sign * h * nrm[0]
+        out[row, 1] = x1 - sign * h * nrm[1]
 
 
 def select(candidates: list[Candidate], boundaries: list[Boundary], config: LandmarkConfig = LandmarkConfig(),
@@ -807,13 +1003,14 @@ def on_wall_reason(c: Candidate, config: LandmarkConfig, z_range: tuple[float, f
 
 
 def _robust_scale(candidates: list[Candidate]) -> tuple[float, int]:
-    """``1.4826 · median |G| / σ_line`` over the candidates with a finite offset, and their number."""
+    """``1.4826 · median |G| / σ_line`` over the candidates with a finite offset, and their number (``math.isfinite``
+    and :func:`~stablemarks.planes.median` of the finite ratios: NumPy's answers, without its per-call overhead)."""
     z = []
     for c in candidates:
         sigma = c.sigma_wall_line
-        if np.isfinite(c.wall_offset) and np.isfinite(sigma) and sigma > 0:
+        if math.isfinite(c.wall_offset) and math.isfinite(sigma) and sigma > 0:
             z.append(abs(c.wall_offset) / sigma)
-    return (1.4826 * float(np.median(z)) if z else np.nan), len(z)
+    return (1.4826 * median(np.array(z)) if z else np.nan), len(z)
 
 
 def line_noise_scale(candidates: list[Candidate], min_lines: int, floor: float = 0.0) -> float:
@@ -1226,11 +1423,9 @@ def _beside_nearer_sides(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o
     samples at offsets ``o0 … o1 − 1`` on each of ``sides`` of each line (in that order). Per line and side, as the
     former array code: each row's sample columns ``rint(u_row ± offset)``, ``u_row = u_left + slope (v − mid)``;
     a sample holds a disparity when inside the box and finite, is nearer when above ``d_wall + gate σ + 1`` at
-    its column (computed once per column of the box)."""
-    limit = np.empty(max(0, c1 - c0))
-    for col in range(c0, c1):
-        fc = float(col)
-        limit[col - c0] = _interp(fc, columns, d) + gate * _interp(fc, columns, sigma_d) + 1.0
+    its column (computed once per column of the box, when a sample there first holds a disparity: the lines'
+    samples reach a few dozen of the box's columns)."""
+    limit = np.full(max(0, c1 - c0), np.nan)
     n = len(u_left)
     out = np.zeros(n, dtype=np.int64)
     for i in range(n):
@@ -1255,7 +1450,11 @@ def _beside_nearer_sides(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o
                     if not np.isfinite(x):
                         continue
                     n_valid += 1
-                    if x > limit[col - c0]:
+                    lim = limit[col - c0]
+                    if np.isnan(lim):
+                        fc = float(col)
+                        lim = limit[col - c0] = _interp(fc, columns, d) + gate * _interp(fc, columns, sigma_d) + 1.0
+                    if x > lim:
                         n_near += 1
                 if n_valid > 0:
                     n_held += 1
@@ -1418,8 +1617,8 @@ def _inner_columns(camera: StereoCamera, X, plane, edge: str, depth: float = 0.3
 
 def _other_walls(world_map: Map, plane) -> tuple[np.ndarray, list[int]]:
     """The map's walls (K, 2, 2) and the index of ``plane`` among them to leave out (none if not in the map)."""
-    ids = [w.id for w in world_map]
-    return world_map.segments(), ([ids.index(plane.id)] if plane.id in ids else [])
+    walls, exclude, _ = world_map.others(plane.id)
+    return walls, exclude
 
 
 def other_wall_gap(camera: StereoCamera, fit: PlaneFit, world_map: Map, edge: str, search_sigma: float) -> float:
@@ -1442,18 +1641,41 @@ def other_wall_gap(camera: StereoCamera, fit: PlaneFit, world_map: Map, edge: st
     outer = lo if u_e < u_i else hi
     outer = u_e + 2.0 * (outer - u_e)
     cols = np.linspace(u_e, outer, max(2, int(abs(outer - u_e)) + 1))
-    walls, exclude = _other_walls(world_map, fit.plane)
+    walls, exclude, kept = world_map.others(fit.plane.id)
     if len(walls) == len(exclude):
         return np.inf
-    X = fit.X
-    rays = camera.column_ray(X, cols)
-    dist = ray_distances(camera.optical_centres(X)[0], rays, walls, exclude=exclude)
-    cam = camera.camera_pose(X)
-    Z = dist * (rays @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
-    d = np.where(np.isfinite(Z) & (Z > 0), camera.f * camera.baseline / np.where(Z > 0, Z, 1.0), 0.0)
+    cx, cy, psi, c, s = camera._frame(fit.X)
     d_edge, sigma = fit.prediction.disparity_at(u_e)
-    hit = np.flatnonzero(np.abs(d - d_edge) <= fit.prediction.gate * sigma + 1.0)
-    return float(abs(cols[hit[0]] - u_e)) if len(hit) else np.inf
+    hit = _first_wall_in_band(cols, float(camera.cu), float(camera.f), c, s, cx, cy, walls, kept,
+                              float(np.cos(psi)), float(np.sin(psi)),
+                              float(camera.f * camera.baseline), float(d_edge),
+                              float(fit.prediction.gate * sigma + 1.0))
+    return float(abs(cols[hit] - u_e)) if hit >= 0 else np.inf
+
+
+@njit(cache=True, error_model="numpy")
+def _first_wall_in_band(cols, cu, f, c, s, cx, cy, walls, kept, fwd0, fwd1, fb, d_edge, tol):  # pragma: no cover
+    """:func:`other_wall_gap`'s scan: the first of the left image's columns ``cols`` (in order from the edge) whose
+    ray from the left optical centre ``(cx, cy)`` (heading ``(c, s)``, ``fwd`` its (cos, sin) as NumPy computes
+    them) first hits one of the walls ``walls[kept]`` at a disparity within ``tol`` of ``d_edge``; -1 when none.
+    Per column what :meth:`~stablemarks.geometry.StereoCamera.column_ray`, :func:`~stablemarks.maps.ray_distances`
+    and the depth along the optical axis computed for all of them (the ray's unit direction, the nearest crossing
+    beyond 1e-9 m, ``Z = dist · (ray · fwd)``, disparity ``fb / Z`` or 0 where not finite and positive), stopping at
+    the first hit: the former array code cast every ray over twice the window (~90 µs an edge). The depth's dot
+    product is summed left to right (NumPy's matrix-vector product may fuse its multiply-add: the disparity may
+    differ in its last bit, the hit only at an exact tie)."""
+    for i in range(cols.shape[0]):
+        xn = (cols[i] - cu) / f
+        d0 = c + s * xn
+        d1 = s - c * xn
+        norm = np.sqrt(d0 * d0 + d1 * d1)
+        r0 = d0 / norm
+        r1 = d1 / norm
+        Z = nearest_crossing(cx, cy, r0, r1, walls, kept) * (r0 * fwd0 + r1 * fwd1)
+        d = fb / Z if np.isfinite(Z) and Z > 0 else 0.0
+        if abs(d - d_edge) <= tol:
+            return i
+    return -1
 
 
 def edge_incidence(camera: StereoCamera, X, plane, edge: str) -> float:
@@ -1469,8 +1691,10 @@ def edge_incidence(camera: StereoCamera, X, plane, edge: str) -> float:
 def edge_occluded(camera: StereoCamera, X, world_map: Map, plane, edge: str) -> bool:
     """Whether another wall of the map stands between the left camera and the wall's end ``edge``: the region
     then ends at that wall's edge, not at this one's."""
-    walls, exclude = _other_walls(world_map, plane)
-    return bool(segments_block(camera.optical_centres(X)[0], plane.edge(edge), walls, exclude=exclude)[0])
+    walls, _, kept = world_map.others(plane.id)
+    cx, cy, *_ = camera._frame(X)  # the left optical centre; segments_block of its one sight line
+    ex, ey = plane.edge(edge).tolist()
+    return bool(sight_blocked(cx, cy, ex - cx, ey - cy, walls, kept))
 
 
 def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, offset_px: float) -> float:
@@ -1492,8 +1716,8 @@ def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, o
     r0, r1 = c + s * xn, s - c * xn
     norm = math.sqrt(r0 * r0 + r1 * r1)
     ray = np.array([r0 / norm, r1 / norm])
-    walls, exclude = _other_walls(world_map, plane)
-    dist = ray_distances(camera.optical_centres(X)[0], ray, walls, exclude=exclude)[0]
+    walls, _, kept = world_map.others(plane.id)
+    dist = nearest_crossing(cx, cy, float(ray[0]), float(ray[1]), walls, kept)  # ray_distances of the one ray
     cam = camera.camera_pose(X)
     Z_bg = dist * (ray @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
     return float((fb / Z_bg if np.isfinite(Z_bg) and Z_bg > 0 else 0.0) - fb / Z_e)

@@ -202,6 +202,32 @@ class Map:
             return np.zeros((0, 2, 2))
         return np.array([[p.P1, p.P2] for p in self.planes])
 
+    def others(self, plane_id: str) -> tuple[np.ndarray, list[int], np.ndarray]:
+        """The walls :meth:`segments` (K, 2, 2) (read-only: made once per map), the index of wall ``plane_id`` among
+        them to leave out (``[]`` when not in the map) and the indices of the others (:func:`kept_walls`): what the
+        landmark stage's ray casts past a wall ask of the map a dozen times a frame."""
+        cache = self._others
+        if plane_id not in cache:
+            ids = [p.id for p in self.planes]
+            exclude = [ids.index(plane_id)] if plane_id in ids else []
+            kept = kept_walls(len(ids), exclude)
+            kept.setflags(write=False)
+            cache[plane_id] = (exclude, kept)
+        exclude, kept = cache[plane_id]
+        return self._segments, list(exclude), kept
+
+    @cached_property
+    def _segments(self) -> np.ndarray:
+        """:meth:`segments`, made once (read-only)."""
+        walls = self.segments()
+        walls.setflags(write=False)
+        return walls
+
+    @cached_property
+    def _others(self) -> dict[str, tuple[list[int], np.ndarray]]:
+        """:meth:`others`' answers by wall id, made on first request."""
+        return {}
+
     def to_dict(self) -> dict:
         d = {"frame": self.frame}
         if any(self.accuracy):
@@ -504,12 +530,40 @@ def _crossings(origins, rays, walls, exclude: Sequence[int] = ()):
     o = np.asarray(origins, dtype=float).reshape(-1, 2)
     r = np.asarray(rays, dtype=float).reshape(-1, 2)
     walls = np.asarray(walls, dtype=float).reshape(-1, 2, 2)
-    kept = np.arange(len(walls))
-    if len(exclude):
-        kept = np.delete(kept, list(exclude))  # the walls np.delete keeps (its index rules and errors)
+    kept = kept_walls(len(walls), exclude)
     if len(o) != len(r) and len(o) != 1 and len(r) != 1:
         raise ValueError(f"_crossings: {len(o)} origins and {len(r)} rays do not broadcast")
     return _crossings_kernel(o, r, walls, kept)
+
+
+def kept_walls(n_walls: int, exclude: Sequence[int] = ()) -> np.ndarray:
+    """Indices (int) of the ``n_walls`` walls left after leaving out those in ``exclude`` (np.delete's index rules
+    and errors)."""
+    kept = np.arange(n_walls)
+    return np.delete(kept, list(exclude)) if len(exclude) else kept
+
+
+@njit(cache=True, error_model="numpy")
+def nearest_crossing(o0, o1, r0, r1, walls, kept):  # pragma: no cover - numba
+    """:func:`ray_distances` of one ray from ``(o0, o1)`` along the unit ``(r0, r1)`` to the walls ``walls[kept]``:
+    the least crossing beyond 1e-9 m, ``inf`` when none."""
+    dist = np.inf
+    for j in range(kept.shape[0]):
+        lam = _crossing(o0, o1, r0, r1, walls, kept[j])
+        if lam > 1e-9 and lam < dist:
+            dist = lam
+    return dist
+
+
+@njit(cache=True, error_model="numpy")
+def sight_blocked(o0, o1, r0, r1, walls, kept):  # pragma: no cover - numba
+    """:func:`segments_block` of one sight line from ``(o0, o1)`` to ``(o0 + r0, o1 + r1)`` past the walls
+    ``walls[kept]``: whether one crosses it strictly between its ends (:func:`_blocked`'s bounds)."""
+    for j in range(kept.shape[0]):
+        lam = _crossing(o0, o1, r0, r1, walls, kept[j])
+        if (lam > 1e-9) & (lam < 1 - 1e-6):
+            return True
+    return False
 
 
 @njit(cache=True, error_model="numpy")
@@ -520,18 +574,23 @@ def _crossings_kernel(o, r, walls, kept):  # pragma: no cover - numba
     for i in range(n):
         oi = 0 if o.shape[0] == 1 else i
         ri = 0 if r.shape[0] == 1 else i
-        r0, r1 = r[ri, 0], r[ri, 1]
         for j in range(kept.shape[0]):
-            w = kept[j]
-            a0, a1 = walls[w, 0, 0], walls[w, 0, 1]
-            s0, s1 = walls[w, 1, 0] - a0, walls[w, 1, 1] - a1
-            denom = r0 * s1 - r1 * s0
-            qx = a0 - o[oi, 0]
-            qy = a1 - o[oi, 1]
-            lj = (qx * s1 - qy * s0) / denom
-            mu = (qx * r1 - qy * r0) / denom
-            lam[i, j] = lj if (abs(denom) > 1e-12) & (mu >= 0) & (mu <= 1) else np.nan
+            lam[i, j] = _crossing(o[oi, 0], o[oi, 1], r[ri, 0], r[ri, 1], walls, kept[j])
     return lam
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _crossing(o0, o1, r0, r1, walls, w):  # pragma: no cover - numba
+    """:func:`_crossings` of one ray ``o + lam r`` and one wall ``walls[w]`` (K, 2, 2): ``lam``, NaN where the ray
+    misses the wall or runs parallel to it."""
+    a0, a1 = walls[w, 0, 0], walls[w, 0, 1]
+    s0, s1 = walls[w, 1, 0] - a0, walls[w, 1, 1] - a1
+    denom = r0 * s1 - r1 * s0
+    qx = a0 - o0
+    qy = a1 - o1
+    lj = (qx * s1 - qy * s0) / denom
+    mu = (qx * r1 - qy * r0) / denom
+    return lj if (abs(denom) > 1e-12) & (mu >= 0) & (mu <= 1) else np.nan
 
 
 def segments_block(origins, targets, walls, exclude: Sequence[int] = ()) -> np.ndarray:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -119,6 +120,20 @@ class PlanePrediction:
     def window(self) -> tuple[int, int]:
         return int(self.columns[0]), int(self.columns[-1])
 
+    @cached_property
+    def band_table(self) -> np.ndarray:
+        """(K, 8) float64, read-only: per column, ``d``, its difference to the next column's, then the same of
+        ``sigma_d``, ``v_top`` and ``v_bottom`` (0 at the last column): the linear interpolation's terms, for the
+        per-pixel loop of :func:`~stablemarks.landmarks.right_region` (made once per prediction; the differences
+        are those it computed per pixel)."""
+        table = np.zeros((len(self.d), 8))
+        for q, a in enumerate((self.d, self.sigma_d, self.v_top, self.v_bottom)):
+            a = np.asarray(a)
+            table[:, 2 * q] = a
+            table[:-1, 2 * q + 1] = a[1:] - a[:-1]  # in the array's own dtype, as the loop subtracted them
+        table.setflags(write=False)
+        return table
+
     def disparity_at(self, u) -> tuple[np.ndarray, np.ndarray]:
         """Predicted disparity and σ_d at (sub-pixel) left columns ``u`` (linear interpolation)."""
         u = np.asarray(u, dtype=float)
@@ -200,8 +215,9 @@ def predict_plane(
     cov_X = np.asarray(cov_X, dtype=float)
     gate = config.gate_sigma
     ends = np.stack([plane.P1, plane.P2])
-    uv = camera.project_columns(X, ends)
-    cov_I = camera.cov_columns(X, cov_X, ends)  # Eq 5: known wall ends
+    # Eq 5, known wall ends: StereoCamera.cov_columns from the one projection that gives the columns too
+    uv, J_X, _ = camera.project_columns(X, ends, jacobians=True)
+    cov_I = J_X @ cov_X @ np.swapaxes(J_X, -1, -2)
     sig = np.sqrt(np.stack([cov_I[:, 0, 0], cov_I[:, 1, 1]], axis=-1) + camera.sigma_img**2)
     edges = {
         w: EdgePrediction(w, ends[i], uv[i], sig[i], w in plane.free_edges) for i, w in enumerate(("p1", "p2"))
@@ -212,8 +228,8 @@ def predict_plane(
         return None
     W = camera.width
     if np.all(np.isfinite(uv[:, 0])):
-        lo = np.nanmin(uv[:, 0] - gate * sig[:, 0])
-        hi = np.nanmax(uv[:, 0] + gate * sig[:, 0])
+        lo = _nan_extreme(min, (uv[:, 0] - gate * sig[:, 0]).tolist())
+        hi = _nan_extreme(max, (uv[:, 0] + gate * sig[:, 0]).tolist())
     else:  # one end behind the camera: the wall runs out of the image on that side
         inside = np.isfinite(uv[:, 0])
         u_in = uv[inside, 0][0]
@@ -225,8 +241,8 @@ def predict_plane(
         probe = plane.point_at(np.array([np.mean(parts[0].intervals[0])]))[0]
         u_probe = camera.project_columns(X, probe)[0]
         lo, hi = (u_in - gate * s_in, W - 0.5) if u_probe >= u_in else (-0.5, u_in + gate * s_in)
-    u0 = int(np.clip(np.ceil(lo), 0, W - 1))
-    u1 = int(np.clip(np.floor(hi), 0, W - 1))
+    u0 = int(min(max(float(np.ceil(lo)), 0.0), W - 1))  # np.clip of the whole number, on Python floats
+    u1 = int(min(max(float(np.floor(hi)), 0.0), W - 1))
     if hi < 0 or lo > W - 1 or u1 < u0:
         return None
     columns = np.arange(u0, u1 + 1)
@@ -241,6 +257,12 @@ def predict_plane(
     v_top = camera.cv + camera.f * (camera.mount_height - z_high) / Z
     v_bottom = camera.cv + camera.f * (camera.mount_height - z_low) / Z
     return PlanePrediction(plane, columns, d, np.sqrt(var_d), v_top, v_bottom, edges, gate)
+
+
+def _nan_extreme(pick, values: list[float]) -> float:
+    """``np.nanmin`` (``pick`` = min) or ``np.nanmax`` (max) of a few Python floats, at least one of them not NaN:
+    the extreme of those that are not NaN."""
+    return pick(v for v in values if v == v)
 
 
 def predict_planes(camera: StereoCamera, X, cov_X, world_map: Map, config: PlaneConfig = PlaneConfig()):
@@ -401,13 +423,12 @@ def fit_plane(
         s0 = float(wgt @ s_in) / sum_w
         ds = s_in - s0
         w_ds = wgt * ds
-        N = np.array([[sum_w, w_ds.sum()], [w_ds.sum(), w_ds @ ds]])
-        N_inv = _inverse_spd2(N)
+        N_inv = _inverse_spd2(sum_w, w_ds.sum(), w_ds @ ds)  # N = [[Σw, Σw·ds], [Σw·ds, Σw·ds²]]
         if N_inv is None:
             return FailedFit(plane, "wall seen over too short a span to fit", n)
         a, b = (float(v) for v in N_inv @ np.array([wgt @ o_in, w_ds @ o_in]))
-    res = (o[inl] - a - b * (s[inl] - s0)) / sigma_o[inl]
-    chi2_dof = float(res @ res) / max(1, int(np.count_nonzero(inl)) - 2)
+    res = _residuals(s, o, sigma_o, inl, a, b, s0)[0][inl]  # the final line's, of the final inliers
+    chi2_dof = float(res @ res) / max(1, len(res) - 2)
     # one independent measurement per `correlation_px` pixels of the full band (the subsample carries
     # len(s)/n of its information). The residuals are correlated down the column as well (13–14 px either way
     # with 15 px windows, measured on the simulator's walls); counting one measurement per window area, with
@@ -549,41 +570,45 @@ def _fuse_points(P, cov_P, P1, t, nrm, a, b, s0, cov_R):  # pragma: no cover - n
     n = P.shape[0]
     P_hat = np.empty((n, 2))
     cov_hat = np.empty((n, 2, 2))
+    for i in range(n):
+        (P_hat[i, 0], P_hat[i, 1]), (cov_hat[i, 0, 0], cov_hat[i, 0, 1], cov_hat[i, 1, 0], cov_hat[i, 1, 1]) = \
+            fuse_one(P[i, 0], P[i, 1], cov_P[i, 0, 0], cov_P[i, 0, 1], cov_P[i, 1, 0], cov_P[i, 1, 1], P1, t, nrm,
+                     a, b, s0, cov_R)
+    return P_hat, cov_hat
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def fuse_one(p0, p1, c00, c01, c10, c11, P1, t, nrm, a, b, s0, cov_R):  # pragma: no cover - numba
+    """:func:`_fuse_points` of one point ``(p0, p1)`` with covariance ``[[c00, c01], [c10, c11]]``, for numba
+    callers: ``((p̂0, p̂1), (ĉ00, ĉ01, ĉ10, ĉ11))``."""
     H0 = nrm[0] - b * t[0]
     H1 = nrm[1] - b * t[1]
-    for i in range(n):
-        px = P[i, 0] - P1[0]
-        py = P[i, 1] - P1[1]
-        ds = (px * t[0] + py * t[1]) - s0
-        G = (px * nrm[0] + py * nrm[1]) - a - b * ds
-        g0 = -1.0
-        g1 = -ds
-        var_V = g0 * cov_R[0, 0] * g0 + g0 * cov_R[0, 1] * g1 + g1 * cov_R[1, 0] * g0 + g1 * cov_R[1, 1] * g1
-        c00, c01, c10, c11 = cov_P[i, 0, 0], cov_P[i, 0, 1], cov_P[i, 1, 0], cov_P[i, 1, 1]
-        PH0 = c00 * H0 + c01 * H1
-        PH1 = c10 * H0 + c11 * H1
-        S = (PH0 * H0 + PH1 * H1) + var_V
-        K0 = PH0 / S
-        K1 = PH1 / S
-        P_hat[i, 0] = P[i, 0] - K0 * G  # innovation 0 − G(L̃)
-        P_hat[i, 1] = P[i, 1] - K1 * G
-        A00 = 1.0 - K0 * H0
-        A01 = 0.0 - K0 * H1
-        A10 = 0.0 - K1 * H0
-        A11 = 1.0 - K1 * H1
-        M00 = A00 * c00 + A01 * c10
-        M01 = A00 * c01 + A01 * c11
-        M10 = A10 * c00 + A11 * c10
-        M11 = A10 * c01 + A11 * c11
-        R00 = (M00 * A00 + M01 * A01) + var_V * (K0 * K0)
-        R01 = (M00 * A10 + M01 * A11) + var_V * (K0 * K1)
-        R10 = (M10 * A00 + M11 * A01) + var_V * (K1 * K0)
-        R11 = (M10 * A10 + M11 * A11) + var_V * (K1 * K1)
-        cov_hat[i, 0, 0] = 0.5 * (R00 + R00)
-        cov_hat[i, 0, 1] = 0.5 * (R01 + R10)
-        cov_hat[i, 1, 0] = 0.5 * (R10 + R01)
-        cov_hat[i, 1, 1] = 0.5 * (R11 + R11)
-    return P_hat, cov_hat
+    px = p0 - P1[0]
+    py = p1 - P1[1]
+    ds = (px * t[0] + py * t[1]) - s0
+    G = (px * nrm[0] + py * nrm[1]) - a - b * ds
+    g0 = -1.0
+    g1 = -ds
+    var_V = g0 * cov_R[0, 0] * g0 + g0 * cov_R[0, 1] * g1 + g1 * cov_R[1, 0] * g0 + g1 * cov_R[1, 1] * g1
+    PH0 = c00 * H0 + c01 * H1
+    PH1 = c10 * H0 + c11 * H1
+    S = (PH0 * H0 + PH1 * H1) + var_V
+    K0 = PH0 / S
+    K1 = PH1 / S
+    A00 = 1.0 - K0 * H0
+    A01 = 0.0 - K0 * H1
+    A10 = 0.0 - K1 * H0
+    A11 = 1.0 - K1 * H1
+    M00 = A00 * c00 + A01 * c10
+    M01 = A00 * c01 + A01 * c11
+    M10 = A10 * c00 + A11 * c10
+    M11 = A10 * c01 + A11 * c11
+    R00 = (M00 * A00 + M01 * A01) + var_V * (K0 * K0)
+    R01 = (M00 * A10 + M01 * A11) + var_V * (K0 * K1)
+    R10 = (M10 * A00 + M11 * A01) + var_V * (K1 * K0)
+    R11 = (M10 * A10 + M11 * A11) + var_V * (K1 * K1)
+    # innovation 0 − G(L̃); the covariance symmetrized
+    return (p0 - K0 * G, p1 - K1 * G), (0.5 * (R00 + R00), 0.5 * (R01 + R10), 0.5 * (R10 + R01), 0.5 * (R11 + R11))
 
 
 def median(x: np.ndarray) -> float:
@@ -593,10 +618,10 @@ def median(x: np.ndarray) -> float:
     return float(p[k]) if len(x) % 2 else float((p[:k].max() + p[k]) / 2)
 
 
-def _inverse_spd2(N: np.ndarray, max_cond: float = 1e12) -> np.ndarray | None:
-    """Inverse of a symmetric positive semi-definite 2×2 matrix, None when its condition number (ratio of
-    its eigenvalues) exceeds ``max_cond``."""
-    p, q, r = N[0, 0], N[0, 1], N[1, 1]
+def _inverse_spd2(p, q, r, max_cond: float = 1e12) -> np.ndarray | None:
+    """Inverse of the symmetric positive semi-definite 2×2 matrix ``[[p, q], [q, r]]`` (given by its three numbers,
+    taken as float64), None when its condition number (ratio of its eigenvalues) exceeds ``max_cond``."""
+    p, q, r = np.float64(p), np.float64(q), np.float64(r)
     det = p * r - q * q
     lam_max = 0.5 * (p + r) + np.hypot(0.5 * (p - r), q)
     if not lam_max > 0 or not det / lam_max * max_cond >= lam_max:  # the smaller eigenvalue is det / lam_max
@@ -670,8 +695,10 @@ def _member_fractions(seg, offsets, pixel_uv, region, c0, v0, H, W):  # pragma: 
 
 
 def dilate(region: np.ndarray, px: int) -> np.ndarray:
-    """Binary dilation by a square of half-size ``px``."""
+    """Binary dilation by a square of half-size ``px`` (a bool mask's bytes are 0 and 1: it is dilated as uint8 in
+    place of a converted copy, and the 0 / 1 result read back as bool)."""
     if px <= 0:
         return region
     k = np.ones((2 * px + 1, 2 * px + 1), np.uint8)
-    return cv2.dilate(region.astype(np.uint8), k).astype(bool)
+    region = np.asarray(region)
+    return cv2.dilate(region.view(np.uint8) if region.dtype == bool else region.astype(np.uint8), k).view(bool)

@@ -4,15 +4,12 @@ same values, bit for bit."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 from numba import njit
 
 from stablemarks import landmarks as L
 from stablemarks import planes as P
 from stablemarks.config import Config
-from stablemarks.landmarks import relative_error_model
 
 from .helpers import assert_same_candidate, boundary_model_inputs
 
@@ -101,46 +98,7 @@ def test_reweight_equals_numpy_on_random_points():
             assert np.array_equal(x, y)
 
 
-# ------------------------------------------------------------------ the relative model's slope steps
-class _CopyingFit:
-    """A fit whose :meth:`fuse_point` with another slope goes through a copy of the fit
-    (``dataclasses.replace``), as :func:`~stablemarks.landmarks.relative_error_model`'s slope steps did."""
-
-    def __init__(self, fit):
-        self._fit = fit
-
-    def __getattr__(self, name):
-        return getattr(self._fit, name)
-
-    def fuse_point(self, P, cov_P, b=None):
-        return (self._fit if b is None else replace(self._fit, b=b)).fuse_point(P, cov_P)
-
-
-def relative_error_model_reference(camera, fit, boundary, u_left, u_right, t, measured: bool = False):
-    """The former :func:`~stablemarks.landmarks.relative_error_model`: the slope's steps through copies of the fit."""
-    return relative_error_model(camera, _CopyingFit(fit), boundary, u_left, u_right, t, measured)
-
-
-def test_relative_error_model_equals_the_reference(scenario_frames, scenario_models):
-    """The error model of every plane's candidates, from every boundary found, both variants (``measured``): the
-    same Jacobians, own σ and shared covariance, bit for bit."""
-    config = Config()
-    n = 0
-    for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
-        camera = config.camera(frame[4])
-        pairs = front.kept_pairs
-        for plane in model.planes:
-            for b in plane.boundaries:
-                t = plane.fit.plane.direction if b.edge == "p1" else -plane.fit.plane.direction
-                idx = np.flatnonzero(plane.members)
-                for measured in (False, True):
-                    got = relative_error_model(camera, plane.fit, b, pairs.u_left[idx], pairs.u_right[idx], t, measured)
-                    want = relative_error_model_reference(camera, plane.fit, b, pairs.u_left[idx], pairs.u_right[idx],
-                                                          t, measured)
-                    for x, y in zip(got, want, strict=True):
-                        assert (x is None and y is None) or np.array_equal(x, y)
-                    n += got[0] is not None
-    assert n > 5
+# (the relative model's slope steps: its numba pass is compared with the former NumPy code in test_speedups_8)
 
 
 # ------------------------------------------------------------------ the segments' edge pixels

@@ -22,10 +22,13 @@ condition's name first):
     pattern is incompatible with the predicted pose, in ``disagree_frames`` frames in a row: the odometry and
     the images disagree (a wheel slip, a kidnap). The localizer then widens the pose covariance just enough for
     the pattern to fit (:meth:`stablemarks.Localizer.step`) and updates from it. When no landmark and no pattern
-    is found at all (a kidnap that moved the walls beyond even the widened bands), the walls fitted in the frame,
-    their slopes in agreement with the map, relocalize a copy of the filter across them; it is kept, and the
-    condition holds, only if a pattern of ``min_pattern`` landmarks then associates and fits
-    (``Localizer._relocalize``); this takes ``relocalize_frames`` such frames in a row.
+    is found at all (a kidnap that moved the walls beyond even the widened bands) in ``relocalize_frames`` frames
+    in a row while the walls fitted in the frame disagree with the pose, or a frame finds fewer than half the
+    landmarks in view, the pose is re-initialised where the frame's own lines put the most landmarks, within
+    ``relocalize_radius`` (:func:`stablemarks.estimation.relocalize.pose_from_lines`), else the walls fitted in
+    the frame, their slopes in agreement with the map, relocalize a copy of the filter across them; either is
+    kept, and the condition holds, only if a pattern of ``min_pattern`` landmarks then associates and fits
+    (``Localizer._relocalize``).
 ``blind``
     no landmark observed for ``blind_frames`` frames in a row (while the filter holds landmarks).
 ``heading_drift``

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
+from numba import njit
 from scipy.optimize import linear_sum_assignment
 from scipy.special import chdtri
 from threadpoolctl import ThreadpoolController
@@ -354,6 +355,128 @@ def _add_sym_rank(P: np.ndarray, A: np.ndarray, K: np.ndarray, block: int = 256)
         diag = strip[:, : i1 - i0]
         diag[...] = np.triu(diag) + np.triu(diag, 1).T
         P[i1:, i0:i1] = strip[:, i1 - i0:].T
+
+
+NIS_DECISION_TOL = 1e-6
+"""Relative margin around a χ² gate inside which :meth:`JointEKF.associate_joint` decides a trial with the
+stacked solve of :meth:`JointEKF.joint_nis` instead of its running Cholesky factor (:func:`_sequential_trials`)."""
+
+
+@njit(cache=True, inline="always")
+def _s_block(P, H5, idx5, i, j, a, b):  # pragma: no cover - numba
+    """Entry ``(a, b)`` of the (2, 2) block ``H_i P[idx5_i, idx5_j] H_jᵀ`` of the stacked innovation covariance
+    of landmarks ``i`` and ``j`` (``H5`` (c, 2, 5) their Jacobians over the state indices ``idx5`` (c, 5))."""
+    acc = 0.0
+    for p in range(5):
+        hp = H5[i, a, p]
+        if hp == 0.0:
+            continue
+        row = idx5[i, p]
+        inner = 0.0
+        for q in range(5):
+            inner += P[row, idx5[j, q]] * H5[j, b, q]
+        acc += hp * inner
+    return acc
+
+
+@njit(cache=True)
+def _sequential_trials(P, H5, idx5, var_img, nu, order_r, order_c, gates, start, taken_r, taken_c, tol
+                       ):  # pragma: no cover - numba
+    """The trials of :meth:`JointEKF.associate_joint` from ``order_r[start:]``, ``order_c[start:]`` (landmark row,
+    measurement column, cheapest first) on top of the pairs ``taken_r``, ``taken_c`` already chosen.
+
+    The joint NIS of a trial (the chosen pairs and one more) is ``|w|² + |u|²``: ``w = L⁻¹ ν`` of the chosen pairs
+    with ``L`` the Cholesky factor of their stacked innovation covariance, grown by the new pair's two rows (its
+    block column ``B`` against the chosen ones, ``Y = L⁻¹ B``, the Schur complement ``S_nn − YᵀY`` factored in
+    closed form, ``u`` the new rows of ``w``), so each trial costs O(m) blocks instead of a fresh (2m, 2m) solve.
+    Blocks are read from ``P`` as needed (:func:`_s_block`), never the whole covariance of the landmarks in view.
+    ``nu`` (c, k, 2): the innovation of every pair [px]; ``gates[n]``: the χ² gate of ``2n`` dof.
+
+    Returns ``(stop, rows, cols)``: the chosen pairs and ``stop = -1`` when every trial was decided, else the
+    index of the first trial left undecided — its NIS within ``tol`` (relative) of its gate, or a Schur
+    complement not clearly positive definite (also while refactoring the chosen pairs) — for the caller to decide
+    with the stacked solve before it resumes after it."""
+    c, k = nu.shape[0], nu.shape[1]
+    cap = 2 * min(c, k)
+    L = np.zeros((cap, cap))
+    w = np.zeros(cap)
+    blk = np.empty(cap, np.int64)  # the landmark row of each factored dimension
+    comp = np.empty(cap, np.int64)  # and which of its two observation rows it is
+    out_r = np.empty(cap // 2, np.int64)
+    out_c = np.empty(cap // 2, np.int64)
+    used_r = np.zeros(c, np.bool_)
+    used_c = np.zeros(k, np.bool_)
+    Y = np.empty((cap, 2))
+    n = 0
+    ok = True
+    pending = -1
+    t = start
+    # refactor the chosen pairs first (pending >= 0: a chosen pair), then try the ordered ones
+    while True:
+        if pending < len(taken_r) - 1:
+            pending += 1
+            r, col = taken_r[pending], taken_c[pending]
+            is_taken = True
+        else:
+            while t < len(order_r) and (used_r[order_r[t]] or used_c[order_c[t]]):
+                t += 1
+            if t >= len(order_r):
+                return -1, out_r[:n], out_c[:n]
+            if not ok:
+                return t, out_r[:n], out_c[:n]
+            r, col = order_r[t], order_c[t]
+            is_taken = False
+        m2 = 2 * n
+        for d in range(m2):  # Y = L⁻¹ B, B[d, b] = S[dim d, (r, b)]
+            for b in range(2):
+                v = _s_block(P, H5, idx5, blk[d], r, comp[d], b)
+                for e in range(d):
+                    v -= L[d, e] * Y[e, b]
+                Y[d, b] = v / L[d, d]
+        d00 = _s_block(P, H5, idx5, r, r, 0, 0) + var_img
+        d10 = _s_block(P, H5, idx5, r, r, 1, 0)
+        d11 = _s_block(P, H5, idx5, r, r, 1, 1) + var_img
+        v0, v1 = nu[r, col, 0], nu[r, col, 1]
+        for d in range(m2):
+            d00 -= Y[d, 0] * Y[d, 0]
+            d10 -= Y[d, 1] * Y[d, 0]
+            d11 -= Y[d, 1] * Y[d, 1]
+            v0 -= Y[d, 0] * w[d]
+            v1 -= Y[d, 1] * w[d]
+        good = d00 > 1e-12 * var_img
+        l00 = np.sqrt(d00) if good else 1.0
+        l10 = d10 / l00
+        e11 = d11 - l10 * l10
+        good = good and e11 > 1e-12 * var_img
+        l11 = np.sqrt(e11) if good else 1.0
+        u0 = v0 / l00
+        u1 = (v1 - l10 * u0) / l11
+        if is_taken:  # chosen already: kept; a factor that is not clearly positive definite decides nothing more
+            accept = True
+            ok = ok and good
+        else:
+            if not good:
+                return t, out_r[:n], out_c[:n]
+            nis = u0 * u0 + u1 * u1
+            for d in range(m2):
+                nis += w[d] * w[d]
+            gate = gates[n + 1]
+            if abs(nis - gate) <= tol * gate:
+                return t, out_r[:n], out_c[:n]
+            accept = nis <= gate
+            t += 1
+        if accept:
+            for d in range(m2):
+                L[m2, d] = Y[d, 0]
+                L[m2 + 1, d] = Y[d, 1]
+            L[m2, m2], L[m2 + 1, m2], L[m2 + 1, m2 + 1] = l00, l10, l11
+            w[m2], w[m2 + 1] = u0, u1
+            blk[m2], blk[m2 + 1] = r, r
+            comp[m2], comp[m2 + 1] = 0, 1
+            out_r[n], out_c[n] = r, col
+            used_r[r] = True
+            used_c[col] = True
+            n += 1
 
 
 # ---------------------------------------------------------------- validation
@@ -832,28 +955,35 @@ class JointEKF:
         ``costs``: :meth:`association_costs` of the same arguments, when the caller has them already.
         """
         ids, z, d2, cost = self.association_costs(measured, pan, candidates, extra_cost) if costs is None else costs
-        order = [(r, c) for r, c in zip(*np.nonzero((d2 <= self.config.gate) & np.isfinite(cost)), strict=True)]
-        order.sort(key=lambda rc: cost[rc])
-        chosen: list[tuple[int, int]] = []
-        used_r, used_c = set(), set()
+        r_gated, c_gated = np.nonzero((d2 <= self.config.gate) & np.isfinite(cost))
+        if len(r_gated) == 0:
+            return []
+        order = np.argsort(cost[r_gated, c_gated], kind="stable")  # the order of Python's stable sort on the costs
+        order_r, order_c = r_gated[order], c_gated[order]
+        # every trial's joint NIS from the landmarks in view projected once, by a running Cholesky factor
+        rows = self._rows(ids, "associate_joint")
+        uv, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
+        H5 = np.ascontiguousarray(np.concatenate([J_I_X, J_I_l], axis=2))
+        idx5 = np.ascontiguousarray(self._idx5(rows))
+        nu = z[None, :, :] - uv[:, None, :]  # (c, k, 2), as (z − uv) of each trial
         p = self.config.gate_probability
-        if order:
-            # every trial's joint NIS (:meth:`joint_nis`) from the landmarks in view projected once
-            rows = self._rows(ids, "associate_joint")
-            uv, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
-        taken_r: list[int] = []
-        for r, c in order:
-            if r in used_r or c in used_c:
-                continue
-            trial = chosen + [(int(ids[r]), int(c))]
-            tr = taken_r + [int(r)]
-            nis = self._joint_nis(rows[tr], z[[j for _, j in trial]], uv[tr], J_I_X[tr], J_I_l[tr])
-            if nis <= _chi2_gate(2 * len(trial), 1.0 - p):
-                chosen = trial
-                taken_r = tr
-                used_r.add(r)
-                used_c.add(c)
-        return sorted(chosen, key=lambda q: q[1])
+        n_max = min(len(ids), len(z))
+        gates = np.array([_chi2_gate(2 * n, 1.0 - p) if n else 0.0 for n in range(n_max + 1)])
+        taken_r = np.zeros(0, dtype=np.int64)
+        taken_c = np.zeros(0, dtype=np.int64)
+        start = 0
+        while True:
+            stop, taken_r, taken_c = _sequential_trials(self._P, H5, idx5, self._var_img, nu, order_r, order_c,
+                                                        gates, start, taken_r, taken_c, NIS_DECISION_TOL)
+            if stop < 0:
+                break
+            # a trial too close to its gate (or badly conditioned) for the running factor: the stacked solve
+            tr = np.append(taken_r, order_r[stop])
+            tc = np.append(taken_c, order_c[stop])
+            if self._joint_nis(rows[tr], z[tc], uv[tr], J_I_X[tr], J_I_l[tr]) <= gates[len(tr)]:
+                taken_r, taken_c = tr, tc
+            start = stop + 1
+        return sorted(((int(ids[r]), int(c)) for r, c in zip(taken_r, taken_c, strict=True)), key=lambda q: q[1])
 
     def information_gain(self, ids: Sequence[int], pan: float = 0.0) -> np.ndarray:
         """(m,) expected information each landmark's observation alone gives about the pose [nat].

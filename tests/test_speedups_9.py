@@ -128,3 +128,32 @@ def test_sequential_trials_nis_equals_the_stacked_solve(scenario_frames, scenari
                 assert stop == -1 and (len(got_r) == m) == accepted
             n += 1
     assert n > 100
+
+
+def test_association_projection_equals_a_fresh_one(scenario_frames, scenario_models):
+    """The projection :meth:`~JointEKF.associate_joint` now takes from :meth:`~JointEKF.association_costs` (the
+    landmarks in view out of the projection of every candidate) against the one it made itself before
+    (:meth:`~JointEKF._project` of the landmarks in view): the same numbers, bit for bit; and the same costs as the
+    public method's."""
+    rng = np.random.default_rng(71)
+    n = 0
+    for ekf, measured in _filters(scenario_frames, scenario_models, rng):
+        for cand in (None, [i for i in ekf.landmark_ids if rng.random() < 0.6] or ekf.landmark_ids):
+            costs, got = ekf._association_costs(measured, 0.0, cand, None)
+            want = ekf._project(ekf._rows(costs[0], "test"), ekf._x, ekf._camera(0.0))
+            for a, b in zip(got, want, strict=True):
+                assert a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
+            for a, b in zip(costs, ekf.association_costs(measured, 0.0, cand, None), strict=True):
+                assert np.array_equal(a, b, equal_nan=True)
+            n += 1
+    assert n > 50
+
+
+def test_idx5_equals_the_reference(scenario_frames, scenario_models):
+    """:meth:`~JointEKF._idx5` filled in place against the former concatenation, for every subset size."""
+    for ekf, _ in _filters(scenario_frames, scenario_models, np.random.default_rng(73))[:10]:
+        for m in range(ekf.n_landmarks + 1):
+            rows = np.arange(m)
+            want = np.concatenate([np.broadcast_to(np.arange(3), (m, 3)), ekf._idx2[rows]], axis=1)
+            got = ekf._idx5(rows)
+            assert got.dtype == want.dtype and np.array_equal(got, want)

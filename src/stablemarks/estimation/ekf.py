@@ -352,9 +352,21 @@ def _add_sym_rank(P: np.ndarray, A: np.ndarray, K: np.ndarray, block: int = 256)
         i1 = min(i0 + block, n)
         strip = P[i0:i1, i0:]
         strip += left[i0:i1] @ right[i0:].T
-        diag = strip[:, : i1 - i0]
-        diag[...] = np.triu(diag) + np.triu(diag, 1).T
+        _mirror_upper(strip[:, : i1 - i0])
         P[i1:, i0:i1] = strip[:, i1 - i0:].T
+
+
+@njit(cache=True)
+def _mirror_upper(D):  # pragma: no cover - numba
+    """``D ← triu(D) + triu(D, 1)ᵀ`` in place for a square block ``D`` (a view into ``P``): the upper triangle
+    plus 0.0 (as the sum adds it: −0.0 becomes +0.0), mirrored below the diagonal — the same bits as the NumPy
+    expression without its four (b, b) temporaries (~8 µs for a small state, most of a small update's mirroring)."""
+    n = D.shape[0]
+    for i in range(n):
+        for j in range(i, n):
+            D[i, j] = D[i, j] + 0.0
+        for j in range(i):
+            D[i, j] = D[j, i]
 
 
 NIS_DECISION_TOL = 1e-6

@@ -6,6 +6,7 @@ where the arithmetic is unchanged)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from stablemarks.config import Config
 from stablemarks.estimation import JointEKF, NewLandmark
@@ -215,3 +216,34 @@ def test_update_equals_the_reference(scenario_frames, scenario_models, monkeypat
             assert np.array_equal(P, P.T) and np.linalg.eigvalsh(P).min() > -1e-12
             n += bool(chosen)
     assert n > 50
+
+
+# ------------------------------------------------------------------ the whole on-line loop
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["lab", "office", "hall"])
+def test_run_online_equals_the_former_ekf(name, monkeypatch):
+    """The on-line loop (:func:`~stablemarks.online.run_online`: the association of every frame by
+    :func:`~stablemarks.estimation.association.associate_frame`, its updates, landmarks entered and dropped) over
+    the first 16 frames of three scenarios, with this pass's EKF and with the former association and mirror swapped
+    back: every frame's pose and pose covariance, landmark count and associations, and the final state and
+    covariance, bit for bit."""
+    from stablemarks.online import run_online
+    from stablemarks.sim.run import simulate_run
+    from stablemarks.sim.scenario import load_scenario
+    from stablemarks.sim.source import SimulatedSource
+
+    run = simulate_run(load_scenario(name))
+    got = run_online(SimulatedSource(run, frames=16))
+    monkeypatch.setattr(E.JointEKF, "associate_joint", associate_joint_reference)
+    monkeypatch.setattr(E, "_add_sym_rank", add_sym_rank_reference)
+    want = run_online(SimulatedSource(run, frames=16))
+    assert len(got.records) == len(want.records) == 16
+    n_assoc = 0
+    for a, b in zip(got.records, want.records, strict=True):
+        assert a.pose.tobytes() == b.pose.tobytes() and a.cov_pose.tobytes() == b.cov_pose.tobytes()
+        assert (a.n_landmarks, a.observed, a.associated, a.new, a.dropped) == (
+            b.n_landmarks, b.observed, b.associated, b.new, b.dropped)
+        assert np.array_equal(a.nis, b.nis)
+        n_assoc += len(a.associated)
+    assert got.ekf.state.tobytes() == want.ekf.state.tobytes() and got.ekf.cov.tobytes() == want.ekf.cov.tobytes()
+    assert got.ekf.landmark_ids == want.ekf.landmark_ids and n_assoc > 20

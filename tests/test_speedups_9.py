@@ -196,9 +196,9 @@ def test_add_sym_rank_equals_the_reference():
 
 def test_update_equals_the_reference(scenario_frames, scenario_models, monkeypatch):
     """Every scenario frame's filters, associated and updated (:meth:`~JointEKF.select_for_update`,
-    :meth:`~JointEKF.update`, also iterated) with this pass's code and with the former association and mirror
-    swapped back: the same pairs chosen, the same state and covariance bit for bit, the covariance exactly symmetric
-    and positive semi-definite."""
+    :meth:`~JointEKF.update`, also iterated) with this pass's code and with the former association, ranking and
+    mirror swapped back: the same pairs chosen, the same state and covariance bit for bit, the covariance exactly
+    symmetric and positive semi-definite."""
     n = 0
     for ekf, measured in _filters(scenario_frames, scenario_models, np.random.default_rng(83)):
         for iterations in (1, 3):
@@ -207,7 +207,7 @@ def test_update_equals_the_reference(scenario_frames, scenario_models, monkeypat
             res = got.update([(i, measured[j]) for i, j in chosen], iterations=iterations)
             with monkeypatch.context() as mp:
                 mp.setattr(E, "_add_sym_rank", add_sym_rank_reference)
-                ref_chosen = want.select_for_update(associate_joint_reference(want, measured))
+                ref_chosen = select_for_update_reference(want, associate_joint_reference(want, measured))
                 ref = want.update([(i, measured[j]) for i, j in ref_chosen], iterations=iterations)
             assert chosen == ref_chosen
             assert got.state.tobytes() == want.state.tobytes() and got.cov.tobytes() == want.cov.tobytes()
@@ -224,9 +224,9 @@ def test_update_equals_the_reference(scenario_frames, scenario_models, monkeypat
 def test_run_online_equals_the_former_ekf(name, monkeypatch):
     """The on-line loop (:func:`~stablemarks.online.run_online`: the association of every frame by
     :func:`~stablemarks.estimation.association.associate_frame`, its updates, landmarks entered and dropped) over
-    the first 16 frames of three scenarios, with this pass's EKF and with the former association and mirror swapped
-    back: every frame's pose and pose covariance, landmark count and associations, and the final state and
-    covariance, bit for bit."""
+    the first 16 frames of three scenarios, with this pass's EKF and with the former association, ranking and
+    mirror swapped back: every frame's pose and pose covariance, landmark count and associations, and the final state
+    and covariance, bit for bit."""
     from stablemarks.online import run_online
     from stablemarks.sim.run import simulate_run
     from stablemarks.sim.scenario import load_scenario
@@ -235,6 +235,7 @@ def test_run_online_equals_the_former_ekf(name, monkeypatch):
     run = simulate_run(load_scenario(name))
     got = run_online(SimulatedSource(run, frames=16))
     monkeypatch.setattr(E.JointEKF, "associate_joint", associate_joint_reference)
+    monkeypatch.setattr(E.JointEKF, "select_for_update", select_for_update_reference)
     monkeypatch.setattr(E, "_add_sym_rank", add_sym_rank_reference)
     want = run_online(SimulatedSource(run, frames=16))
     assert len(got.records) == len(want.records) == 16
@@ -247,3 +248,61 @@ def test_run_online_equals_the_former_ekf(name, monkeypatch):
         n_assoc += len(a.associated)
     assert got.ekf.state.tobytes() == want.ekf.state.tobytes() and got.ekf.cov.tobytes() == want.ekf.cov.tobytes()
     assert got.ekf.landmark_ids == want.ekf.landmark_ids and n_assoc > 20
+
+
+# ------------------------------------------------------------------ the ranking by information gain
+def select_for_update_reference(ekf, pairs, pan=0.0, k=None):
+    """The former :meth:`~JointEKF.select_for_update`: ranked by :meth:`~JointEKF.information_gain`."""
+    pairs = list(pairs)
+    k = ekf.config.max_updates_per_frame if k is None else int(k)
+    if not pairs:
+        return []
+    gain = ekf.information_gain([p[0] for p in pairs], pan)
+    return [pairs[i] for i in np.argsort(-gain, kind="stable")[:k]]
+
+
+def information_gain_reference(ekf, ids, pan=0.0):
+    """The former :meth:`~JointEKF.information_gain`, in one piece."""
+    rows = ekf._rows(ids, "information_gain")
+    pred = ekf.predict_observation(ids, pan)
+    P_XX = ekf._P[:3, :3]
+    P_lX = ekf._P[ekf._idx2[rows][:, :, None], np.arange(3)[None, None, :]]
+    C = pred.J_I_X @ P_XX + pred.J_I_l @ P_lX
+    S_given_X = pred.S - C @ np.linalg.pinv(P_XX, hermitian=True) @ np.swapaxes(C, 1, 2)
+    return 0.5 * (np.linalg.slogdet(pred.S)[1] - np.linalg.slogdet(S_given_X)[1])
+
+
+def test_select_for_update_equals_the_reference(scenario_frames, scenario_models, monkeypatch):
+    """Every scenario filter's landmarks in view (and random subsets, for k of 1 to 8; also from a pose whose
+    heading variance is zero or tiny, where the pose covariance is singular or nearly): the closed-form gains
+    within 1e-9 nat of :meth:`~JointEKF.information_gain` (bit for bit the former one) wherever they are finite,
+    and the same pairs in the same order, with the fallback forced on (a gap of 1e300) and off."""
+    rng = np.random.default_rng(89)
+    n = n_nan = 0
+    for ekf, _ in _filters(scenario_frames, scenario_models, rng):
+        variants = [ekf]
+        if rng.random() < 0.3:
+            for var_th in (0.0, 1e-30):
+                e = ekf.copy()
+                e.reset_pose(e.pose, np.diag([0.05**2, 0.05**2, var_th]))
+                variants.append(e)
+        for e in variants:
+            seen = e.visible(0.0)
+            if not seen:
+                continue
+            want_gain = information_gain_reference(e, seen)
+            assert e.information_gain(seen).tobytes() == want_gain.tobytes()
+            fast = E._closed_form_gains(*e._information_terms(seen, 0.0))
+            ok = np.isfinite(fast)
+            n_nan += not ok.all()
+            assert np.allclose(fast[ok], want_gain[ok], rtol=0, atol=1e-9)
+            for _ in range(4):
+                pairs = [(i, int(rng.integers(0, 50))) for i in seen if rng.random() < 0.7] or [(seen[0], 0)]
+                k = int(rng.integers(1, 9))
+                want = select_for_update_reference(e, pairs, k=k)
+                for tol in (E.GAIN_RANK_TOL, 1e300, 0.0):
+                    monkeypatch.setattr(E, "GAIN_RANK_TOL", tol)
+                    assert e.select_for_update(pairs, k=k) == want
+                    monkeypatch.undo()
+                n += 1
+    assert n > 200 and n_nan > 0

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import csv
+import shutil
+from pathlib import Path
+
 import numpy as np
 
 
@@ -53,3 +57,47 @@ def boundary_model_inputs(scenario_frames, scenario_models, config):
             idx = np.flatnonzero(plane.members)
             for b in plane.boundaries:
                 yield camera, plane, b, pairs, idx, step
+
+
+def disparity_variants(disp: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A disparity image as it is, cluttered (a fifth of its pixels 1.5 px nearer) and thinned (97 % of its
+    pixels invalid), the inputs the plane fit's equality tests run on."""
+    cluttered = disp.copy()
+    cluttered[rng.random(disp.shape) < 0.2] += np.float32(1.5)
+    sparse = disp.copy()
+    sparse[rng.random(disp.shape) < 0.97] = np.nan
+    return disp, cluttered, sparse
+
+
+def edit_sequence(src: Path, dst: Path, column: str, change) -> Path:
+    """A copy ``dst`` of the sequence folder ``src`` with ``column`` of odometry.csv (``x``, ``y``) or frames.csv
+    (``pan``) replaced, row ``k`` by ``change(k, value)``."""
+    shutil.copytree(src, dst)
+    name = "odometry.csv" if column in ("x", "y") else "frames.csv"
+    with open(dst / name) as f:
+        rows = list(csv.DictReader(f))
+    for k, r in enumerate(rows):
+        r[column] = str(change(k, float(r[column])))
+    with open(dst / name, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return dst
+
+
+def drop_pan_column(src: Path, dst: Path) -> Path:
+    """A copy ``dst`` of the sequence folder ``src`` whose frames.csv has no pan column."""
+    shutil.copytree(src, dst)
+    with open(dst / "frames.csv") as f:
+        rows = list(csv.DictReader(f))
+    with open(dst / "frames.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "pan"], extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    return dst
+
+
+def position_rmse(poses, truth) -> float:
+    """RMS of the position error [m] of poses (n, ≥2) against truth (n, ≥2)."""
+    d = np.asarray(poses)[:, :2] - np.asarray(truth)[:, :2]
+    return float(np.sqrt(np.mean(np.sum(d**2, axis=1))))

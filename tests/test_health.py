@@ -1,9 +1,7 @@
 """Knowing when it is lost: health conditions fire on faults and stay quiet on clean runs; recovery from a
 kidnap (issue: viewing direction and health)."""
 
-import csv
 import json
-import shutil
 
 import numpy as np
 import pytest
@@ -13,6 +11,8 @@ from stablemarks.health import HealthConfig, HealthMonitor
 from stablemarks.metrics import pose_nees
 from stablemarks.sim.export import write_simulated_sequence
 from stablemarks.sim.run import simulate_run
+
+from .helpers import drop_pan_column, edit_sequence
 
 
 @pytest.fixture(scope="module")
@@ -24,20 +24,6 @@ def _log(out):
     return [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
 
 
-def _edit(src, dst, column, change):
-    shutil.copytree(src, dst)
-    name = "odometry.csv" if column in ("x", "y") else "frames.csv"
-    with open(dst / name) as f:
-        rows = list(csv.DictReader(f))
-    for k, r in enumerate(rows):
-        r[column] = str(change(k, float(r[column])))
-    with open(dst / name, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    return dst
-
-
 def test_a_clean_run_prints_no_warning(lab_seq, tmp_path, capsys):
     assert main(["run", str(lab_seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
     assert "warning:" not in capsys.readouterr().err
@@ -45,7 +31,7 @@ def test_a_clean_run_prints_no_warning(lab_seq, tmp_path, capsys):
 
 
 def test_a_kidnap_is_reported_within_three_frames_and_recovered(lab_seq, tmp_path, capsys):
-    seq = _edit(lab_seq, tmp_path / "kid", "y", lambda k, v: v + 0.5 if k > 10 else v)
+    seq = edit_sequence(lab_seq, tmp_path / "kid", "y", lambda k, v: v + 0.5 if k > 10 else v)
     assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
     err = capsys.readouterr().err
     first = [line for line in err.splitlines() if line.startswith("warning: frame")]
@@ -65,7 +51,7 @@ def test_a_kidnap_is_reported_within_three_frames_and_recovered(lab_seq, tmp_pat
 def test_a_wrong_pan_is_reported_within_twenty_frames(lab_seq, tmp_path, capsys):
     """Every recorded pan 0.2 rad off: the walls are not where the pan says, and the warning names the pan (and
     the CLI's --pan-topic) within the first 20 frames."""
-    seq = _edit(lab_seq, tmp_path / "pan", "pan", lambda k, v: v + 0.2)
+    seq = edit_sequence(lab_seq, tmp_path / "pan", "pan", lambda k, v: v + 0.2)
     assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
     err = capsys.readouterr().err
     first = [line for line in err.splitlines() if line.startswith("warning: frame") and "pan" in line]
@@ -85,18 +71,6 @@ def room_seq(tmp_path_factory):
     return write_simulated_sequence(simulate_run(load_scenario("room"), seed=11), tmp_path_factory.mktemp("h") / "room")
 
 
-def _drop_pan(src, dst):
-    shutil.copytree(src, dst)
-    with open(dst / "frames.csv") as f:
-        rows = list(csv.DictReader(f))
-    fields = [k for k in rows[0] if k != "pan"]
-    with open(dst / "frames.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-    return dst
-
-
 @pytest.mark.parametrize("fault", ["pan+0.2", "no pan column"])
 def test_walls_turned_together_are_not_used(room_seq, tmp_path, capsys, fault):
     """The room's two walls are each turned too little to fail their own gate, together far beyond the
@@ -105,9 +79,9 @@ def test_walls_turned_together_are_not_used(room_seq, tmp_path, capsys, fault):
     at frame 2 and drifted to 2.5× the odometry's ATE; and later, once the heading's uncertainty had grown enough
     to take in the pan's error, edges_not_found cleared and the same happened)."""
     if fault == "pan+0.2":
-        seq = _edit(room_seq, tmp_path / "pan", "pan", lambda k, v: v + 0.2)
+        seq = edit_sequence(room_seq, tmp_path / "pan", "pan", lambda k, v: v + 0.2)
     else:
-        seq = _drop_pan(room_seq, tmp_path / "nopan")
+        seq = drop_pan_column(room_seq, tmp_path / "nopan")
     assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
     err = capsys.readouterr().err
     first = [line for line in err.splitlines() if line.startswith("warning: frame") and "pan" in line]
@@ -178,7 +152,7 @@ def test_a_pan_left_out_while_the_head_turns_is_reported_and_costs_nothing(corri
     without its pan column, the filter took the turn into the heading frame by frame, each step inside its gates:
     ATE 0.50 m against dead reckoning's 0.17 m, final NEES 26800. The images' heading running away from the
     odometry's is reported, names the pan, and from then on the estimate is dead reckoning's."""
-    seq = _drop_pan(corridor_seq, tmp_path / "nopan")
+    seq = drop_pan_column(corridor_seq, tmp_path / "nopan")
     assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
     err = capsys.readouterr().err
     drift = [line for line in err.splitlines() if line.startswith("warning: frame") and "heading_drift" in line]
@@ -223,7 +197,7 @@ def test_a_kidnap_beyond_the_widened_bands_is_relocalized_from_the_walls(room_se
     found (the warning came 9 frames late and the ATE after it was 0.56 m against dead reckoning's 0.59 m, final
     NEES 64). After two such frames the fitted walls' offsets relocalize a copy of the filter, confirmed by a
     pattern of landmarks."""
-    seq = _edit(room_seq, tmp_path / "kid", "y", lambda k, v: v + 0.5 if k > 10 else v)
+    seq = edit_sequence(room_seq, tmp_path / "kid", "y", lambda k, v: v + 0.5 if k > 10 else v)
     assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
     err = capsys.readouterr().err
     first = [line for line in err.splitlines() if line.startswith("warning: frame")]

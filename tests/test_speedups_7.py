@@ -16,10 +16,11 @@ from stablemarks import pipeline
 from stablemarks import planes as P
 from stablemarks.config import Config
 from stablemarks.geometry import StereoCamera
+from stablemarks.maps import ray_distances
 from stablemarks.vision import area_stereo as A
 
 from .conftest import COV_PRIOR
-from .helpers import assert_same_candidate, boundary_model_inputs
+from .helpers import assert_same_candidate, boundary_model_inputs, disparity_variants
 
 
 # ------------------------------------------------------------------ the SAD kernel's choice of the dense plan
@@ -193,11 +194,7 @@ def test_fit_plane_equals_the_reference(scenario_frames, scenario_models):
         camera = config.camera(frame[4])
         for pred in model.predictions:
             disp = np.array(front.disparity.left)
-            cluttered = disp.copy()
-            cluttered[rng.random(disp.shape) < 0.2] += np.float32(1.5)
-            sparse = disp.copy()
-            sparse[rng.random(disp.shape) < 0.97] = np.nan
-            for d in (disp, cluttered, sparse):
+            for d in disparity_variants(disp, rng):
                 new = P.fit_plane(camera, model.X, d, pred, config.planes)
                 ref = fit_plane_reference(camera, model.X, d, pred, config.planes)
                 assert type(new) is type(ref)
@@ -443,7 +440,7 @@ def edge_depth_step_reference(camera, X, world_map, plane, edge, offset_px):
     _, Z_e = camera.to_camera(X, P)
     ray = camera.column_ray(X, u_out)
     walls, exclude = L._other_walls(world_map, plane)
-    dist = L.ray_distances(camera.optical_centres(X)[0], ray, walls, exclude=exclude)[0]
+    dist = ray_distances(camera.optical_centres(X)[0], ray, walls, exclude=exclude)[0]
     cam = camera.camera_pose(X)
     Z_bg = dist * (ray @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
     return float((fb / Z_bg if np.isfinite(Z_bg) and Z_bg > 0 else 0.0) - fb / Z_e)

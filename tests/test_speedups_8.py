@@ -15,6 +15,8 @@ from stablemarks import planes as P
 from stablemarks.config import Config
 from stablemarks.maps import Map, ray_distances, visible_parts
 
+from .helpers import disparity_variants
+
 
 # ------------------------------------------------------------------ the gap to another wall beyond an edge
 def other_wall_gap_reference(camera, fit, world_map, edge, search_sigma):
@@ -499,11 +501,7 @@ def test_fit_plane_equals_the_reference(scenario_frames, scenario_models):
         camera = config.camera(frame[4])
         for pred in model.predictions:
             disp = np.array(front.disparity.left)
-            cluttered = disp.copy()
-            cluttered[rng.random(disp.shape) < 0.2] += np.float32(1.5)
-            sparse = disp.copy()
-            sparse[rng.random(disp.shape) < 0.97] = np.nan
-            for d in (disp, cluttered, sparse):
+            for d in disparity_variants(disp, rng):
                 for pc in (config.planes, P.PlaneConfig(outlier_sigma=2.0, disparity_bias_px=0.03)):
                     new = P.fit_plane(camera, model.X, d, pred, pc)
                     ref = fit_plane_reference(camera, model.X, d, pred, pc)

@@ -31,7 +31,6 @@ from numba import njit
 from .errors import InputError, expected
 from .geometry import StereoCamera
 from .maps import Map, nearest_crossing, sight_blocked
-from .maps import ray_distances as ray_distances  # re-exported: the former ray casts' references read it here
 from .planes import PlaneConfig, PlaneFit, fuse_one, median, plane_members
 
 REASON_NEAR_BOUNDARY = "near boundary"

@@ -629,7 +629,7 @@ class Localizer:
         front = model = None
         entered = Entered()
         method = self.method
-        nis_high = disagree = edges_missing = turned = reinitialised = False
+        nis_high = disagree = edges_missing = turned = reinitialised = recovering = False
         edges_found = True
         if method.uses_vision:
             check_pair(np.asarray(left), np.asarray(right))
@@ -683,7 +683,6 @@ class Localizer:
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
                 max(len(m) for m in report["incompatible"]) >= self.config.health.min_pattern
             relocated = walls = None
-            reinitialised = False
             if not disagree and not turned and not assoc and model is not None and self.ekf.visible(pan):
                 # no landmark found and no pattern either: a kidnap that moved the walls beyond even the widened
                 # bands? The walls themselves, fitted where they are, say where the robot is (_relocalize), once
@@ -697,9 +696,10 @@ class Localizer:
                 # Landmarks found, but few of those in view: after a slip across the view a few lines can fit a few
                 # landmarks at the wrong pose (the corridor, 0.5 m sideways: three, jointly compatible, held the
                 # heading 3° off). Where the frame's lines put many more of them elsewhere, the robot is there.
-                n_view = len(self.ekf.visible(pan, self._max_incidence))
-                if n_view > self.config.health.min_pattern and 2 * len(assoc) < n_view:
-                    relocated = self._relocalize(None, front, cam_k, pan, found_here=len(assoc))
+                if 2 * len(assoc) < self.ekf.n_landmarks:  # else not fewer than half of those in view either
+                    n_view = len(self.ekf.visible(pan, self._max_incidence))
+                    if n_view > self.config.health.min_pattern and 2 * len(assoc) < n_view:
+                        relocated = self._relocalize(None, front, cam_k, pan, found_here=len(assoc))
             if relocated is not None:
                 self.ekf, record.inflation, model, assoc, how = relocated
                 reinitialised = how == "lines"
@@ -803,7 +803,7 @@ class Localizer:
             timings["select"] = time.perf_counter() - t3
         drift = None
         if method.uses_vision and self.health.drift is None:
-            if record.inflation != 1.0 or reinitialised:
+            if recovering:
                 self._recoveries.append(k)
             h = self.config.health
             while self._recoveries and self._recoveries[0] <= k - h.recoveries_frames:

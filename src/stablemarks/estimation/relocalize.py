@@ -108,14 +108,9 @@ def pose_from_lines(camera: StereoCamera, landmarks: np.ndarray, ids, u_left, u_
     vl = P[j[kp]] - P[i[kp]]
     vq = dq[kl]
     psi = np.arctan2(vl[:, 1], vl[:, 0]) - np.arctan2(vq[:, 1], vq[:, 0])
-    c, s = np.cos(psi), np.sin(psi)
-    mq = 0.5 * (q[a[kl]] + q[b[kl]])
-    mp = 0.5 * (P[i[kp]] + P[j[kp]])
-    centre = mp - np.stack([c * mq[:, 0] - s * mq[:, 1], s * mq[:, 0] + c * mq[:, 1]], axis=1)
+    centre = 0.5 * (P[i[kp]] + P[j[kp]]) - _rotate(psi, 0.5 * (q[a[kl]] + q[b[kl]]))
     theta = wrap_angle(psi - camera.pan)
-    mount = np.array([camera.mount_x, camera.mount_y])
-    ct, st = np.cos(theta), np.sin(theta)
-    xy = centre - np.stack([ct * mount[0] - st * mount[1], st * mount[0] + ct * mount[1]], axis=1)
+    xy = centre - _rotate(theta, np.array([camera.mount_x, camera.mount_y]))
     prior = np.asarray(prior_pose, dtype=float)
     near = (np.linalg.norm(xy - prior[:2], axis=1) <= radius) & (np.abs(wrap_angle(theta - prior[2])) <= heading)
     if not near.any():
@@ -141,13 +136,17 @@ def pose_from_lines(camera: StereoCamera, landmarks: np.ndarray, ids, u_left, u_
     return LineRelocation(refined[best].copy(), inliers, runner_up)
 
 
+def _rotate(angle, v) -> np.ndarray:
+    """Vectors ``v`` (h, 2) or one vector (2,) turned by ``angle`` (h,) [rad]: (h, 2)."""
+    c, s = np.cos(angle), np.sin(angle)
+    v = np.broadcast_to(v, np.shape(angle) + (2,))
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
 def _camera_centre(camera: StereoCamera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Left optical centres (h, 2) and camera headings (h,) of robot poses (h, 3)."""
     th = poses[:, 2]
-    ct, st = np.cos(th), np.sin(th)
-    cx = poses[:, 0] + ct * camera.mount_x - st * camera.mount_y
-    cy = poses[:, 1] + st * camera.mount_x + ct * camera.mount_y
-    return np.stack([cx, cy], axis=1), th + camera.pan
+    return poses[:, :2] + _rotate(th, np.array([camera.mount_x, camera.mount_y])), th + camera.pan
 
 
 def _refine(camera: StereoCamera, pose: np.ndarray, P: np.ndarray, u_l: np.ndarray, u_r: np.ndarray,

@@ -403,7 +403,9 @@ def _textured(sobel: np.ndarray, config: SADConfig) -> np.ndarray:
 # right pixel u sits at column u + pad_l; lane k of left column x reads right column x + off + k
 # with off = pad_l - min_disparity - (D - 1) >= 0. The row's costs sit at costs[x·S + k], S the
 # lane count rounded up to 16 with at least one lane more (held at the dtype's maximum), so that
-# every column starts on a 32-byte boundary; its column sums at colsum[x·D + k].
+# every column starts on a 32-byte boundary; its column sums at colsum[x·D + k], in uint8 when a column of
+# the window cannot sum beyond 255 (block_size · max_pixel <= 255: 150 with StereoBM's prefilter at cap 5 and
+# 15 × 15 windows; modular arithmetic, exact since every true sum fits), else in the cost dtype.
 #
 # Work is planned per row (_plan_row) from the runs of requested pixels: the right pixels whose
 # winners are needed are the requested right pixels and the matches x − d of the requested left
@@ -421,7 +423,8 @@ def _textured(sobel: np.ndarray, config: SADConfig) -> np.ndarray:
 # 2. the costs: box sums along the row kept running from column to column, and each column's best;
 # 3. the winners, from the same costs: the left pixel's (the smallest j with the best cost) and the
 #    right pixel's as a running minimum along the diagonals SAD_RL(u, d) = SAD_LR(u + d, d);
-# 4. for the uniqueness test, both images' smallest cost outside the winner's j ± 1;
+# 4. for the uniqueness test, both images' smallest cost outside the winner's j ± 1 (the right image's only in
+#    the columns whose diagonals reach a requested right pixel);
 # 5. the tests and the sub-pixel refinement, on the requested pixels only, in branch-free loops.
 # Passes 3 and 4 visit the columns _PHASES apart, so that their read-modify-writes of the right
 # pixels' minima never read back a store still in flight (store-to-load forwarding needs equal
@@ -440,7 +443,8 @@ def _textured(sobel: np.ndarray, config: SADConfig) -> np.ndarray:
 # costs pass while the column is in the cache (0.96-1.00x: the costs pass grew by about what the
 # uniqueness pass lost, the winners pass did not shrink; probably the three dependent horizontal reductions
 # per column); the left second-best taken in the winners pass after the winner (1.03x); uint8 instead of
-# int16 prefiltered images for the column sums (1.00-1.04x); 512-bit vectors (numba compiled with
+# int16 prefiltered images for the column sums (1.00-1.04x; with uint8 column sums on int16 images: 0.975x
+# dense, 0.96x with the right second-best costs limited as above in the lab frame's regions); 512-bit vectors (numba compiled with
 # -prefer-256-bit: 1.2-1.25x slower); _PHASES 8 or 32 (1.25x / 1.07x slower). The right image's
 # passes (running minima along the diagonals) are what is left to gain from; computing the right image's
 # costs in their own layout (the same column sums, skewed) would double the column-sum and costs passes.
@@ -637,7 +641,7 @@ def _costs_and_winners(costs, colsum, window, best_left, x0, x1, r, n_disp, stri
         best = top
         if advance:
             for k in range(k0, k1):
-                c = window.dtype.type(window[k] + colsum[ab + k] - colsum[sb + k])
+                c = window.dtype.type(window[k] + window.dtype.type(colsum[ab + k]) - window.dtype.type(colsum[sb + k]))
                 window[k] = c
                 costs[cb + k] = c
                 best = min(best, c)
@@ -664,13 +668,13 @@ def _row_costs(costs, colsum, window, best_left, segs, n_seg, r, n_disp, stride,
             a, b = k0, k0
         ab, sb = _u64(x0 + r) * nd, _u64(x0 - r - 1) * nd
         for k in range(_u64(a), _u64(b)):  # lanes that continue: advance to column x0
-            window[k] += colsum[ab + k] - colsum[sb + k]
+            window[k] = window.dtype.type(window[k] + window.dtype.type(colsum[ab + k]) - window.dtype.type(colsum[sb + k]))
         for lo, hi in ((k0, a), (b, k1)):  # the others: column x0 from scratch
             for k in range(_u64(lo), _u64(hi)):
                 window[k] = 0
             for xx in range(_u64(x0 - r), _u64(x0 + r + 1)):
                 for k in range(_u64(lo), _u64(hi)):
-                    window[k] += colsum[xx * nd + k]
+                    window[k] = window.dtype.type(window[k] + window.dtype.type(colsum[xx * nd + k]))
         _costs_and_winners(costs, colsum, window, best_left, _u64(x0), _u64(x0 + 1), ur, nd, _u64(stride), _u64(k0),
                            _u64(k1), top, False)  # fmt: skip
         _costs_and_winners(costs, colsum, window, best_left, _u64(x0 + 1), _u64(x1), ur, nd, _u64(stride), _u64(k0),
@@ -720,28 +724,79 @@ def _best_in(costs, cb, k0, k1, scale, jvec):  # pragma: no cover - numba
 
 
 @njit(**_NJ)
-def _seconds(costs, key_left, j_right, second_left, second_right, segs, n_seg, off, stride, jlane, mask, top):
+def _seconds(costs, key_left, j_right, second_left, second_right, segs, n_seg, off, stride, jlane, mask, top, rneed,
+             n_rneed):  # fmt: skip
     """The smallest cost outside the winner's j ± 1 (``top``: none) over the row's cost segments (columns [x0, x1),
     lanes [k0, k1) each), for the left pixels (``second_left[x]``, winners' keys ``key_left``) and along the
     diagonals for the right pixels (``second_right``, a running minimum, winners ``j_right``, both at
-    ``x + off + k``). Arrays in the cost dtype; ``jlane[k]`` is lane k's disparity index; "outside j ± 1" is
-    ``(jlane − j + 1) mod 2^16 > 2``. Columns are visited _PHASES apart (see above). (Casts keep the arithmetic
-    in the cost dtype: 16 lanes per AVX2 operation for uint16 costs.)"""
+    ``x + off + k``) — the latter only in the columns of ``rneed[:n_rneed]`` (sorted disjoint column ranges
+    [c0, c1): those whose diagonals reach a requested right pixel, :func:`_right_needs`; elsewhere no right
+    pixel's test reads it). Arrays in the cost dtype; ``jlane[k]`` is lane k's disparity index; "outside j ± 1" is
+    ``(jlane − j + 1) mod 2^16 > 2``."""
     for s in range(n_seg):
         x0, x1, k0, k1 = _u64(segs[s, 0]), _u64(segs[s, 1]), _u64(segs[s, 2]), _u64(segs[s, 3])
-        for phase in range(_u64(_PHASES)):
-            for x in range(x0 + phase, x1, _u64(_PHASES)):
-                cb = x * stride
-                rb = x + off
-                jb = costs.dtype.type(key_left[x] & mask)
-                second = top
-                for k in range(k0, k1):
-                    c = costs[cb + k]
-                    near_left = np.uint16(jlane[k] - jb + 1) <= 2
-                    second = min(second, max(c, costs.dtype.type(near_left * top)))
-                    near_right = np.uint16(jlane[k] - j_right[rb + k] + 1) <= 2
-                    second_right[rb + k] = min(second_right[rb + k], max(c, costs.dtype.type(near_right * top)))
-                second_left[x] = second
+        pos = x0
+        for t in range(n_rneed):
+            a, b = max(pos, _u64(max(rneed[t, 0], 0))), min(x1, _u64(max(rneed[t, 1], 0)))
+            if a >= b:
+                continue
+            if pos < a:
+                _second_left(costs, key_left, second_left, pos, a, k0, k1, stride, jlane, mask, top)
+            _second_both(costs, key_left, j_right, second_left, second_right, a, b, k0, k1, off, stride, jlane, mask,
+                         top)  # fmt: skip
+            pos = b
+        if pos < x1:
+            _second_left(costs, key_left, second_left, pos, x1, k0, k1, stride, jlane, mask, top)
+
+
+@njit(**_NJ)
+def _second_left(costs, key_left, second_left, x0, x1, k0, k1, stride, jlane, mask, top):  # pragma: no cover - numba
+    """:func:`_seconds` of the left pixels of columns [x0, x1), lanes [k0, k1). (Casts keep the arithmetic in the
+    cost dtype: 16 lanes per AVX2 operation for uint16 costs.)"""
+    for x in range(x0, x1):
+        cb = x * stride
+        jb = costs.dtype.type(key_left[x] & mask)
+        second = top
+        for k in range(k0, k1):
+            near_left = np.uint16(jlane[k] - jb + 1) <= 2
+            second = min(second, max(costs[cb + k], costs.dtype.type(near_left * top)))
+        second_left[x] = second
+
+
+@njit(**_NJ)
+def _second_both(costs, key_left, j_right, second_left, second_right, x0, x1, k0, k1, off, stride, jlane, mask,
+                 top):  # fmt: skip
+    """:func:`_seconds` of both images over columns [x0, x1), lanes [k0, k1); columns visited _PHASES apart (see
+    above)."""
+    for phase in range(_u64(_PHASES)):
+        for x in range(x0 + phase, x1, _u64(_PHASES)):
+            cb = x * stride
+            rb = x + off
+            jb = costs.dtype.type(key_left[x] & mask)
+            second = top
+            for k in range(k0, k1):
+                c = costs[cb + k]
+                near_left = np.uint16(jlane[k] - jb + 1) <= 2
+                second = min(second, max(c, costs.dtype.type(near_left * top)))
+                near_right = np.uint16(jlane[k] - j_right[rb + k] + 1) <= 2
+                second_right[rb + k] = min(second_right[rb + k], max(c, costs.dtype.type(near_right * top)))
+            second_left[x] = second
+
+
+@njit(**_NJ)
+def _right_needs(rrun, min_disp, max_disp, out):  # pragma: no cover - numba
+    """The left columns whose costs reach the requested right pixels ``rrun`` (M, 2) (runs [a, b), sorted) along
+    their diagonals, u + min_disp ... u + max_disp, as sorted disjoint ranges [c0, c1) in ``out``; their count."""
+    n = 0
+    for t in range(rrun.shape[0]):
+        c0, c1 = rrun[t, 0] + min_disp, rrun[t, 1] + max_disp
+        if n > 0 and c0 <= out[n - 1, 1]:
+            out[n - 1, 1] = max(out[n - 1, 1], c1)
+        else:
+            out[n, 0] = c0
+            out[n, 1] = c1
+            n += 1
+    return n
 
 
 @njit(**_NJ)
@@ -908,6 +963,7 @@ def _sad_kernel(  # pragma: no cover - numba
     plan_l,
     plan_r,
     probe,
+    cs_probe,
     out_left,
     out_right,
     out_valid,
@@ -943,7 +999,7 @@ def _sad_kernel(  # pragma: no cover - numba
     max_disp = min_disp + n_disp - 1
     pad_l = off + max_disp
     track = uniqueness > 0
-    colsum = np.zeros(n_cols * n_disp, probe.dtype)
+    colsum = np.zeros(n_cols * n_disp, cs_probe.dtype)
     # a column's costs: lanes 0 ... D - 1, then at least one at the dtype's maximum (the cost of "j = -1" or "D"),
     # to a multiple of 16 lanes so that columns start on 32-byte boundaries (no vector straddles a cache line)
     stride = (n_disp // 16 + 1) * 16
@@ -975,6 +1031,7 @@ def _sad_kernel(  # pragma: no cover - numba
         n_levels += 1
     levels = np.zeros((n_levels, n_cols), tex_probe.dtype)  # for _window_sums
     scratch_i = np.empty((3, n_cols), np.int64)
+    rneed = np.empty((n_cols + 1, 2), np.int64)  # for _right_needs
     scratch_f = np.empty((1, n_cols), np.float64)
     # left columns with every lane's window inside, right pixels likewise
     lo_left, hi_left = max(r, r + max_disp), min(n_cols - 1 - r, n_cols - 1 - r + min_disp)
@@ -1055,8 +1112,9 @@ def _sad_kernel(  # pragma: no cover - numba
                     elif x > hi_left:
                         key_left[x] = _best_in(costs, _u64(x * stride), _u64(k0), _u64(k1), scale, jvec)
         if track:
+            n_rneed = _right_needs(rrun, min_disp, max_disp, rneed)
             _seconds(costs, key_left, j_right, second_left, second_right, segs, n_seg, _u64(off), _u64(stride), jlane,
-                     scale - 1, top)  # fmt: skip
+                     scale - 1, top, rneed, n_rneed)  # fmt: skip
         row = y * n_cols
         for t in range(lrun.shape[0]):
             a, b = max(lrun[t, 0], lo_left), min(lrun[t, 1], hi_left + 1)
@@ -1074,6 +1132,11 @@ def _sad_kernel(  # pragma: no cover - numba
                 _right_tests(key_left, best_right, j_right, costs, stride, texsum_right, tex_min, second_right,
                              out_right, row, a, b, n_disp, min_disp, shift, pad_l, r, n_cols, uniqueness, subpixel,
                              tol, top, scratch_i, scratch_f)  # fmt: skip
+
+
+def _colsum_dtype(config: SADConfig):
+    """uint8 when a column of the window (block_size pixels) sums to at most 255, else the cost dtype."""
+    return np.uint8 if config.max_pixel * config.block_size <= 255 else _cost_dtype(config)
 
 
 def _cost_dtype(config: SADConfig):
@@ -1205,7 +1268,8 @@ def _run_prepared(prep: PreparedPair, left_runs, right_runs, volume=None, out=No
             left_runs[0], left_runs[1], right_runs[0], right_runs[1],
             *(plans if plans is not None else
               [_planning_runs(*runs, config.num_disparities, _STEP, n_cols) for runs in (left_runs, right_runs)]),
-            np.zeros(config.num_disparities, _cost_dtype(config)), out_left, out_right, valid,
+            np.zeros(config.num_disparities, _cost_dtype(config)), np.zeros(0, _colsum_dtype(config)),
+            out_left, out_right, valid,
             np.zeros((0, 0, 0), np.int64) if volume is None else volume,
         )  # fmt: skip
     if out is not None:

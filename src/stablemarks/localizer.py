@@ -51,6 +51,56 @@ POSE_GATE_CHI2 = float(chdtri(3, 0.001))
 FOUND_PRIOR = (8.5, 1.5)
 """Pseudo-counts (found, missed) of the rate at which a landmark predicted in view is found, before the run has
 found any (Beta prior, weight of ten landmarks): 85 %, as measured on clean runs of loop, office and hall."""
+REASON_BOUNDARY_RECHECK = "its boundary does not fit the map's free edge at the updated pose"
+"""Why a candidate selected from the prior's model is not entered after all (:meth:`Localizer._recheck_boundaries`):
+a reason of the on-line loop only, beside those of one frame's selection (``landmarks.REASON_*``)."""
+
+
+def _rounded(v, digits: int):
+    """A finite number rounded for the log (None for NaN or an infinity: strict JSON)."""
+    v = float(v)
+    return round(v, digits) if math.isfinite(v) else None
+
+
+def model_log(model: FrameLandmarks | None, rechecked: dict | None = None) -> tuple[list[dict], list[dict]]:
+    """The frame's candidates and boundaries as :attr:`FrameRecord.candidates` and :attr:`FrameRecord.boundaries`.
+
+    Candidates: one object per modelled feature, ``plane`` (its id, as ``landmarks.csv`` names it), ``index``
+    (from the free edge, Table 1's), ``pair`` (the segment pair's index in the frame's kept pairs), ``u_left``,
+    ``u_right`` [px], ``s`` along the wall from the free edge ``edge`` [m], ``selected`` and ``reason`` (None
+    when selected). Boundaries: every free edge found in the images, used or not: ``plane``, ``edge``,
+    ``u_left``, ``u_right`` [px], ``offset`` its distance along the wall from the map's free edge, positive into
+    the wall [m], ``sigma`` its σ along the wall [m], ``snapped``, ``used`` and ``reason`` (a sentence; None when
+    used). ``rechecked``: ``{(plane id, edge): NIS}`` of boundaries that did not fit the map at the updated pose.
+    Rounded to 0.01 px and 0.1 mm: a line of a frame with fifty candidates stays a few kilobytes."""
+    if model is None:
+        return [], []
+    rechecked = rechecked or {}
+    cands = [{"plane": c.plane_id, "index": int(c.index), "pair": int(c.pair), "u_left": _rounded(c.u_left, 2),
+              "u_right": _rounded(c.u_right, 2), "edge": c.edge, "s": _rounded(c.s, 4), "selected": bool(c.selected),
+              "reason": None if c.selected else (c.reason or None)} for c in model.candidates]
+    bounds = []
+
+    def entry(pm, b, used, reason):
+        plane = pm.fit.plane
+        offset = float((np.asarray(b.P) - plane.edge(b.edge)) @ np.asarray(b.inward))
+        bounds.append({"plane": b.plane_id, "edge": b.edge, "u_left": _rounded(b.u[0], 2),
+                       "u_right": _rounded(b.u[1], 2), "offset": _rounded(offset, 4),
+                       "sigma": _rounded(b.sigma_along, 4), "snapped": bool(b.snapped), "used": used,
+                       "reason": reason})
+
+    for pm in model.planes:
+        for b in pm.boundaries:
+            nis = rechecked.get((b.plane_id, b.edge))
+            if nis is None:
+                entry(pm, b, True, None)
+            else:
+                entry(pm, b, False, f"plane {pm.fit.plane.label!r}: the boundary found at {b.edge} does not fit the "
+                                    f"map's free edge at the updated pose (NIS {nis:.0f}): nothing is entered from it")
+        for b, why in pm.rejected_boundaries:
+            if b is not None:
+                entry(pm, b, False, why)
+    return cands, bounds
 
 
 @dataclass(kw_only=True)
@@ -113,6 +163,13 @@ class FrameRecord:
     edge_measurements: list[tuple[str, str, float, float, list[list[float]]]] = field(default_factory=list)
     """Free edges found in this frame that updated the pose (``ekf.edge_updates``): ``(plane id, edge, u_l, u_r,
     covariance of (u_l, u_r) [px²])``; the map's accuracy is added to it."""
+    candidates: list[dict] = field(default_factory=list)
+    """Every feature the frame modelled, with its selection decision and, when rejected, the reason
+    (:func:`model_log`): so that a rejection, e.g. the edge of an unmapped object in front of a wall ("off the
+    wall", "beside something nearer"), can be read in the log as in ``landmarks.csv``."""
+    boundaries: list[dict] = field(default_factory=list)
+    """Every free edge found in the images, used or not, with why not (:func:`model_log`): a boundary that
+    disagrees with the map's free edge is not used to model landmarks."""
 
     def to_dict(self) -> dict:
         """JSON-ready: arrays as lists."""
@@ -131,6 +188,7 @@ class FrameRecord:
             "measurements": [list(m) for m in self.measurements],
             "landmark_priors": [{"ids": ids, "values": vals, "cov": np.asarray(cov).tolist()}
                                 for ids, vals, cov in self.landmark_priors],
+            "candidates": self.candidates, "boundaries": self.boundaries,
         }
 
 
@@ -513,9 +571,11 @@ class Localizer:
         z = (d1 - d0) / math.sqrt(q1 - q0 + (s0 + s1) ** 2)
         return (math.degrees(d1 - d0), z) if abs(z) > self.config.health.drift_sigma else None
 
-    def _recheck_boundaries(self, model: FrameLandmarks, pan: float, record: FrameRecord) -> FrameLandmarks:
+    def _recheck_boundaries(self, model: FrameLandmarks, pan: float, record: FrameRecord
+                            ) -> tuple[FrameLandmarks, dict]:
         """``model`` with the candidates of every snapped boundary that the frame's update makes incompatible with
-        the map's free edge rejected (not entered).
+        the map's free edge rejected (not entered, :data:`REASON_BOUNDARY_RECHECK`), and those boundaries,
+        ``{(plane id, edge): NIS}``, for the log.
 
         The model was made from the prior; after a blind stretch its gate on a boundary
         (``landmarks.boundary_gate_sigma``) is wide, and a boundary snapped onto a line a few pixels inside the
@@ -527,15 +587,14 @@ class Localizer:
         nis = self._edges_nis(snapped, pan)
         bad = {(b.plane_id, b.edge): float(v) for b, v in zip(snapped, nis, strict=True) if v > self.config.ekf.gate}
         if not bad:
-            return model
+            return model, {}
         for (plane_id, edge), nis in bad.items():
             record.warnings.append(
                 f"plane {self.world_map[plane_id].label!r}: the boundary found at {edge} does not fit the map's free "
                 f"edge at the updated pose (NIS {nis:.0f}): nothing is entered from it")
-        reason = "its boundary does not fit the map's free edge at the updated pose"
         return replace(model, candidates=[
-            replace(c, selected=False, reason=reason) if c.selected and (c.plane_id, c.edge) in bad else c
-            for c in model.candidates])
+            replace(c, selected=False, reason=REASON_BOUNDARY_RECHECK) if c.selected and (c.plane_id, c.edge) in bad
+            else c for c in model.candidates]), bad
 
     def _update_edges(self, model: FrameLandmarks, entered: Entered, measurements, pan: float) -> list:
         """Update the pose with the free edges found again in this frame (``ekf.edge_updates``).
@@ -627,6 +686,7 @@ class Localizer:
                              cov_pose=self.ekf.cov_pose, dead_reckoning=self._dead_reckoning.as_array(),
                              odometry=U, cov_odometry=cov_U)
         front = model = None
+        rechecked: dict = {}
         entered = Entered()
         method = self.method
         nis_high = disagree = edges_missing = turned = reinitialised = recovering = False
@@ -793,10 +853,11 @@ class Localizer:
             timings["associate_update"] = t3 - t2
             if not pan_suspect:
                 if chosen and model is not None:
-                    model = self._recheck_boundaries(model, pan, record)
+                    model, rechecked = self._recheck_boundaries(model, pan, record)
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
                                        self.config)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
+            record.candidates, record.boundaries = model_log(model, rechecked)
             if not pan_suspect and not recovering and self.config.ekf.edge_updates and model is not None \
                     and len(record.observed) >= self.config.health.min_pattern and not self.health.active:
                 record.edge_measurements = self._update_edges(model, entered, record.measurements, pan)

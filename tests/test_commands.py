@@ -130,3 +130,79 @@ def test_stereo_writes_disparity_pairs_and_figures(rendered, tmp_path, capsys):
     assert main(["stereo", str(rendered / "frame_000000_left.png"), str(rendered / "frame_000000_right.png"),
                  "--block-size", "4", "--out", str(tmp_path / "bad")]) == 1
     assert "block_size" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ --preset (issue 14)
+class _Stop(Exception):
+    pass
+
+
+def _capture_config(monkeypatch, module, name):
+    """Replace ``module.name`` by a stand-in that keeps the configuration it is called with and stops the
+    command there: the configuration the command resolved from its options."""
+    import importlib
+
+    seen = []
+
+    def stand_in(*args, **kw):
+        seen.append(kw.get("config", next((a for a in args if type(a).__name__ == "Config"), None)))
+        raise _Stop
+
+    monkeypatch.setattr(importlib.import_module(module), name, stand_in)
+    return seen
+
+
+def test_preset_paper_on_run_eval_and_select(rendered, tmp_path, capsys, monkeypatch):
+    from stablemarks.config import Config
+
+    paper = Config.preset("paper").noise.sigma_img
+    assert paper == 0.5 and Config().noise.sigma_img != paper
+    # run writes the resolved configuration
+    from .test_sources import write_lab_sequence
+
+    folder = write_lab_sequence(tmp_path / "lab")
+    for extra, expected in (([], Config().noise.sigma_img), (["--preset", "paper"], paper)):
+        out = tmp_path / f"run{len(extra)}"
+        assert main(["run", str(folder), "--out", str(out), "--method", "dead_reckoning", "--no-figures",
+                     *extra]) == 0
+        assert yaml.safe_load((out / "config.yaml").read_text())["noise"]["sigma_img"] == expected
+    # eval and select: the configuration they hand on
+    seen = _capture_config(monkeypatch, "stablemarks.evaluation", "make_trials")
+    with pytest.raises(_Stop):
+        main(["eval", "lab", "--trials", "1", "--methods", "dead_reckoning", "--preset", "paper",
+              "--out", str(tmp_path / "ev")])
+    assert seen[-1].noise.sigma_img == paper and seen[-1].noise.boundary_px is None
+    seen = _capture_config(monkeypatch, "stablemarks.pipeline", "process_frame")
+    with pytest.raises(_Stop):
+        main(["select", str(rendered / "frame_000000_left.png"), str(rendered / "frame_000000_right.png"),
+              "--map", str(rendered / "map.yaml"), "--pose", "0,0,90deg", "--pose-sigma", "0.05,0.05,1deg",
+              "--calib", str(rendered / "calib"), "--out", str(tmp_path / "sel"), "--preset", "paper"])
+    assert seen[-1].noise.sigma_img == paper
+
+
+def test_preset_then_config_file_then_set(tmp_path, capsys):
+    """Precedence: the preset, then what --config names, then --set."""
+    from .test_sources import write_lab_sequence
+
+    folder = write_lab_sequence(tmp_path / "lab")
+    cfg = tmp_path / "noise.yaml"
+    cfg.write_text("noise: {sigma_img: 0.3}\n")
+    base = ["run", str(folder), "--method", "dead_reckoning", "--no-figures", "--preset", "paper"]
+    for extra, sigma in ((["--config", str(cfg)], 0.3), (["--config", str(cfg), "--set", "noise.sigma_img=0.4"], 0.4)):
+        out = tmp_path / f"o{len(extra)}"
+        assert main([*base, *extra, "--out", str(out)]) == 0
+        noise = yaml.safe_load((out / "config.yaml").read_text())["noise"]
+        assert noise["sigma_img"] == sigma
+        assert noise["boundary_px"] is None  # from the preset: the file does not name it
+
+
+@pytest.mark.parametrize("command", ["run", "eval", "select", "calibrate-noise"])
+def test_an_unknown_preset_is_argparse_s_one_line_error(command, tmp_path, capsys):
+    argv = {"run": ["run", "somewhere"], "eval": ["eval", "lab"], "calibrate-noise": ["calibrate-noise", "lab"],
+            "select": ["select", "l.png", "r.png", "--map", "m.yaml", "--pose", "0,0,0", "--pose-sigma", "1,1,1"]}
+    with pytest.raises(SystemExit) as exc:
+        main([*argv[command], "--out", str(tmp_path / "o"), "--preset", "nonesuch"])
+    assert exc.value.code == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--preset" in err[0] and "invalid choice: 'nonesuch'" in err[0] and "paper" in err[0], err
+    assert not (tmp_path / "o").exists()

@@ -212,11 +212,20 @@ def parse_overrides(items: list[str]) -> dict:
     return out
 
 
+def preset_arg(parser: argparse.ArgumentParser) -> None:
+    """``--preset NAME``, one of :data:`~stablemarks.config.PRESETS`, read by :func:`load_run_config`."""
+    from ..config import PRESETS
+
+    parser.add_argument("--preset", choices=list(PRESETS), default=None,
+                        help="start from a named configuration (paper: the paper's noise values, σ_img 0.5 px); "
+                             "--config and --set change it further")
+
+
 def load_run_config(args, source=None, base=None):
-    """The resolved configuration: ``base`` (default ``--preset NAME`` or the defaults), ``--config FILE``,
-    then every ``--set SECTION.KEY=VALUE``, then the
+    """The resolved configuration, each step on top of the one before: ``base`` (default ``--preset NAME`` or the
+    defaults), ``--config FILE`` (the settings it names), then every ``--set SECTION.KEY=VALUE``, then the
     settings ``source`` describes (its ``config_defaults``: a simulated robot's odometry noise and pan
-    policy) where the user left the default."""
+    policy) where the steps before left the default: preset < file < command line."""
     from ..config import Config, parse_config
     from ..maps import read_yaml
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, expected
-from ._common import make_console, parse_triplet
+from ._common import make_console, parse_triplet, preset_arg
 
 NAME = "calibrate-noise"
 HELP = "estimate σ_img, the boundary noise and the odometry noise from recordings with ground truth"
@@ -37,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="FILE", help="the current configuration (YAML, see README)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override one setting of the current configuration (repeatable)")
-    p.add_argument("--preset", choices=["paper"], help="start from a named preset (paper: the paper's σ values)")
+    preset_arg(p)
     p.add_argument("--trials", type=int, default=2, metavar="N",
                    help="simulated runs per scenario given by name or file (default 2)")
     p.add_argument("--frames", type=int, default=None, metavar="N", help="only the first N frames of each run")
@@ -82,7 +82,6 @@ def _sources(args):
 def run(args) -> int:
     import yaml
 
-    from ..config import Config
     from ..evaluation import TruthObserver
     from ..noisefit import NoiseSamples, collect, consistency, estimate
     from ..online import run_online
@@ -100,8 +99,7 @@ def run(args) -> int:
         raise InputError(f"{out}: is a folder; --out names the YAML file to write")
     if not out.parent.exists():
         raise InputError(f"{out.parent}: no such folder for --out")
-    base = Config.preset(args.preset) if args.preset else Config()
-    current = load_run_config(args, None, base=base)
+    current = load_run_config(args)
     sources, cov0 = _sources(args)
 
     samples = NoiseSamples()

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, expected
-from ._common import check_image_settings, check_out_dir, make_console, parse_sigmas
+from ._common import check_image_settings, check_out_dir, make_console, parse_sigmas, preset_arg
 
 MAX_TRIALS = 100_000
 """Most trials per scenario ``--trials`` takes."""
@@ -60,7 +60,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="base seed of the trials (default: each scenario's seed)")
     p.add_argument("--pose-sigma", default="0.05,0.05,1deg", metavar="SX,SY,STHETA",
                    help="standard deviations of the start pose belief (default 0.05,0.05,1deg)")
-    p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README)")
+    preset_arg(p)
+    p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README), on top of --preset")
     p.add_argument("--out", default="results/eval", metavar="DIR", help="output folder (default results/eval)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures (report.md without them)")
     p.add_argument("--pan-policy", metavar="P1,P2", default=None,
@@ -81,7 +82,6 @@ def run(args) -> int:
     )
     from rich.table import Table
 
-    from ..config import load_config
     from ..evaluation import (
         REPORT_COLUMNS,
         check_backend,
@@ -97,11 +97,12 @@ def run(args) -> int:
         trials_jsonl,
     )
     from ..sim.scenario import MAX_FRAMES, load_scenario
+    from ._common import load_run_config
 
     console = make_console()
     # Validate everything before running or writing anything.
     out = check_out_dir(args.out)
-    config = load_config(args.config)
+    config = load_run_config(args)
     sigma = parse_sigmas(args.pose_sigma, "--pose-sigma")
     if args.seed is not None and not 0 <= args.seed <= MAX_SEED:
         raise InputError(expected(f"a non-negative seed up to {MAX_SEED}", args.seed, where="--seed"))

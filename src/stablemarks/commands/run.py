@@ -17,6 +17,7 @@ from ._common import (
     make_console,
     parse_sigmas,
     parse_triplet,
+    preset_arg,
     recording_options,
 )
 
@@ -39,7 +40,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", metavar="SOURCE",
                    help="sequence folder, bag (.bag, .db3, .mcap or ROS 2 bag folder), KITTI or EuRoC folder")
     p.add_argument("--out", metavar="OUT", help="output folder (default: results/<source name>)")
-    p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README)")
+    preset_arg(p)
+    p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README), on top of --preset")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override one setting on top of --config, e.g. --set ekf.max_updates_per_frame=4 (repeatable)")
     p.add_argument("--method", default="stablemarks",

@@ -16,6 +16,7 @@ from ._common import (
     out_dir_arg,
     parse_pan,
     pose_prior,
+    preset_arg,
 )
 
 NAME = "select"
@@ -35,22 +36,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(default: a pair next to LEFT)")
     p.add_argument("--camera", metavar="MOUNT.yaml", help="camera mounting on the robot (offset, height, pan)")
     p.add_argument("--pan", type=float, default=None, metavar="RAD", help="head pan for this frame [rad]")
-    p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README)")
+    preset_arg(p)
+    p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README), on top of --preset")
     p.add_argument("--mm", action="store_true", help="print the table in millimetres like the paper")
     p.add_argument("--no-figures", action="store_true", help="skip the pictures")
     out_dir_arg(p)
 
 
 def run(args) -> int:
-    from ..config import load_config
     from ..io.images import load_stereo_pair
     from ..io.results import write_landmarks
     from ..pipeline import process_frame
+    from ._common import load_run_config
     from ._tables import landmark_table
 
     console = make_console()
     out = check_out_dir(args.out)
-    config = load_config(args.config)
+    config = load_run_config(args)
     X, cov_X = pose_prior(args.pose, args.pose_sigma)
     pan = parse_pan(args.pan)
     world_map = load_world_map(args.map)

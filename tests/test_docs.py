@@ -179,3 +179,28 @@ def test_the_readme_python_example_runs(lab_sequence, monkeypatch, capsys):
     lines = capsys.readouterr().out.splitlines()
     assert sum("pan_command=" in line for line in lines) == 3
     assert (root / "results" / "lab-landmarks.yaml").is_file()
+
+
+def _readme_reasons() -> list[str]:
+    """The rejection reasons the README lists for ``landmarks.csv``, in its order."""
+    text = " ".join(README.read_text(encoding="utf-8").split())
+    m = re.search(r"`reason`, for rejected ones, is (.*?);", text)
+    assert m, "the README no longer lists the rejection reasons of landmarks.csv"
+    return re.findall(r"`([^`]+)`", m.group(1))
+
+
+def test_the_readme_lists_exactly_the_rejection_reasons_of_the_code():
+    from stablemarks import landmarks
+
+    code = {v for k, v in vars(landmarks).items() if k.startswith("REASON_")}
+    listed = _readme_reasons()
+    assert len(listed) == len(set(listed)), listed
+    assert set(listed) == code, (f"README lists {sorted(set(listed) - code)} that the code does not have, and not "
+                                 f"{sorted(code - set(listed))}")
+
+
+def test_the_readme_names_the_on_line_loop_s_own_rejection_reason():
+    from stablemarks.localizer import REASON_BOUNDARY_RECHECK
+
+    text = " ".join(README.read_text(encoding="utf-8").split())
+    assert f"`{REASON_BOUNDARY_RECHECK}`" in text

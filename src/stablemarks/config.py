@@ -1,17 +1,25 @@
-"""All thresholds in one configuration object, with the paper's defaults, loadable from YAML.
+"""All thresholds in one configuration object, with their defaults, loadable from YAML.
 
-A configuration file holds any subset of the sections below; everything left out keeps its default::
+A configuration file holds any subset of the sections below; everything left out keeps its default. The
+defaults of the main settings (every key, with its unit, is in the field docstrings of each section's class;
+the README's "Configuration" block shows more of them)::
 
-    noise:     {sigma_img: 0.5}                                  # the line-column noise σ_img [px] (Sec 2.3.1)
+    noise:     {sigma_img: 0.25, boundary_px: 2.0, free_boundary_px: 8.0}   # [px]; the paper preset: 0.5, null, null
     odometry:  {trans_per_m: 0.05, rot_per_m_deg: 2.0, rot_per_rad: 0.05, trans_per_rad: 0.005}
-    pan:       {policy: free_edges, angle: 0.0, limits: [-1.5708, 1.5708], max_rate: 1.0472}   # rad, rad/s
-    segments:  {gradient_threshold: 40, min_length: 20}
-    matching:  {min_similarity: 0.5}
-    sad:       {block_size: 15, num_disparities: 64, lr_tolerance: 1.0}
+    pan:       {policy: free_edges, angle: 0.0, max_rate: 1.0471975511965976}   # rad, rad/s
+    segments:  {gradient_threshold: 40, min_length: 16}                       # Sobel units, px
+    matching:  {min_similarity: 0.5, min_overlap: 0.5}
+    sad:       {block_size: 15, num_disparities: 64, min_disparity: 0, lr_tolerance: 1.0}   # px
     filter:    {tolerance: 1.0, min_support: 0.5}
-    planes:    {gate_sigma: 3.0}
-    landmarks: {boundary_sigma: 3.0, min_length_similarity: 0.7}
-    ekf:       {max_updates_per_frame: 6}
+    planes:    {gate_sigma: 3.0, min_pixels: 300, disparity_bias_px: 0.0}
+    landmarks: {boundary_sigma: 3.0, min_length_similarity: 0.7, min_contrast: 30, max_range: 12.0,
+                max_incidence_deg: 60.0, boundary_gate_sigma: 3.0}           # m, deg
+    ekf:       {max_updates_per_frame: 6, edge_updates: false}
+    health:    {blind_frames: 10, drift_sigma: 4.0}
+
+The noise values are measured (``stablemarks calibrate-noise``), not the paper's; ``Config.preset("paper")``
+(``--preset paper``) holds the paper's (:data:`PRESETS`). A command resolves its configuration as the preset,
+then a ``--config`` file, then ``--set`` (``commands._common.load_run_config``).
 
 Unknown sections or keys are rejected with a message naming them.
 

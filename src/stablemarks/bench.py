@@ -137,6 +137,7 @@ def stage_times(repeats: int = 15, run_frames: tuple[int, ...] = (0, 5, 10, 15, 
 
     config = Config()
     frame, scenario, run, camera = lab_pair()
+    camera = config.camera(camera)  # with the configuration's σ_img once, as the Localizer holds its camera
     left, right = frame.left, frame.right
     X = run.poses[0].as_array()
     cov_X = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
@@ -171,7 +172,7 @@ def stage_times(repeats: int = 15, run_frames: tuple[int, ...] = (0, 5, 10, 15, 
         per_frame = []
         for k in (k for k in run_frames if k < len(run)):
             f = run.render(k)
-            cam_k = scenario.camera.with_pan(run.pans[k])
+            cam_k = config.camera(scenario.camera).with_pan(run.pans[k])
             X_k = run.poses[k].as_array()
             ekf_k = _frame_ekf(f.left, f.right, cam_k, world_map, X_k, cov_X, config)
             row = [median_time(lambda f=f: bm.compute(f.left, f.right), repeats)]

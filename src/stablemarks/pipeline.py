@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numba import njit
@@ -536,8 +537,9 @@ class FrontEnd:
     lazy: RegionDisparity | None = field(default=None, repr=False, compare=False)
     regions: Regions | None = field(default=None, repr=False, compare=False)
 
-    @property
+    @cached_property
     def kept_pairs(self) -> SegmentPairs:
+        """The pairs the disparity check keeps (made once: the planes, the association and the log all ask)."""
         return self.pairs.subset(self.kept)
 
     def require(self, regions: Regions, windows=()) -> float:

@@ -444,10 +444,11 @@ def _textured(sobel: np.ndarray, config: SADConfig) -> np.ndarray:
 # uniqueness pass lost, the winners pass did not shrink; probably the three dependent horizontal reductions
 # per column); the left second-best taken in the winners pass after the winner (1.03x); uint8 instead of
 # int16 prefiltered images for the column sums (1.00-1.04x; with uint8 column sums on int16 images: 0.975x
-# dense, 0.96x with the right second-best costs limited as above in the lab frame's regions); 512-bit vectors (numba compiled with
-# -prefer-256-bit: 1.2-1.25x slower); _PHASES 8 or 32 (1.25x / 1.07x slower). The right image's
-# passes (running minima along the diagonals) are what is left to gain from; computing the right image's
-# costs in their own layout (the same column sums, skewed) would double the column-sum and costs passes.
+# dense, 0.96x with the right second-best costs limited as above in the lab frame's regions); 512-bit
+# vectors (numba compiled with -prefer-256-bit: 1.2-1.25x slower); _PHASES 8 or 32 (1.25x / 1.07x slower).
+# The right image's passes (running minima along the diagonals) are what is left to gain from; computing
+# the right image's costs in their own layout (the same column sums, skewed) would double the column-sum
+# and costs passes.
 # ---------------------------------------------------------------------------------------------
 
 _STEP = 32  # lane ranges are rounded to multiples of this (two AVX2 registers of uint16 costs)
@@ -668,7 +669,8 @@ def _row_costs(costs, colsum, window, best_left, segs, n_seg, r, n_disp, stride,
             a, b = k0, k0
         ab, sb = _u64(x0 + r) * nd, _u64(x0 - r - 1) * nd
         for k in range(_u64(a), _u64(b)):  # lanes that continue: advance to column x0
-            window[k] = window.dtype.type(window[k] + window.dtype.type(colsum[ab + k]) - window.dtype.type(colsum[sb + k]))
+            window[k] = window.dtype.type(window[k] + window.dtype.type(colsum[ab + k])
+                                          - window.dtype.type(colsum[sb + k]))
         for lo, hi in ((k0, a), (b, k1)):  # the others: column x0 from scratch
             for k in range(_u64(lo), _u64(hi)):
                 window[k] = 0

@@ -12,6 +12,7 @@ from stablemarks.evaluation import (
     available_methods,
     check_backend,
     check_goals,
+    goals_caveats,
     make_trials,
     summarize,
     trial_seeds,
@@ -132,6 +133,26 @@ def test_summarize_by_hand():
     assert goals["ATE / dead reckoning"].met is True
     assert goals["pose NEES frames inside 95 % bounds"].met is False
     assert goals["re-observation selected − rejected"].met is True
+
+
+def test_goals_cover_each_pan_policy_against_its_own_references():
+    rs = []
+    for t in (0, 1):
+        for policy, ate in (("fixed", 0.05), ("information", 0.3)):
+            rs.append(_fake(t, f"stablemarks@{policy}", nees=[3.0, 3.0], reobs={"a": (9, 10)}, selected=["a"],
+                            ate=ate))
+            rs.append(_fake(t, f"dead_reckoning@{policy}", nees=[3.0, 3.0], reobs={}, nis=(), ate=0.2))
+    s = summarize(rs)
+    goals = check_goals(s)
+    labels = {g.scenario for g in goals}
+    assert labels == {"s @fixed", "s @information"}
+    dr = {g.scenario: g.met for g in goals if g.name == "ATE / dead reckoning"}
+    assert dr == {"s @fixed": True, "s @information": False}
+    # two trials over every frame of the run: the note says N, and nothing about --frames
+    notes = goals_caveats(s, None)
+    assert len(notes) == 1 and "s N = 2" in notes[0]
+    assert any("--frames 2" in n for n in goals_caveats(s, 2))
+    assert not any("--frames" in n for n in goals_caveats(s, 5))
 
 
 def test_bad_scenario_writes_nothing(tmp_path, capsys):

@@ -89,6 +89,7 @@ def run(args) -> int:
         evaluate,
         failures,
         format_value,
+        goals_caveats,
         make_trials,
         report_markdown,
         summarize,
@@ -166,6 +167,7 @@ def run(args) -> int:
     measured = [r for r in results if r.get("error") is None]
     summary = summarize(measured)
     goals = check_goals(summary)
+    caveats = goals_caveats(summary, args.frames) if goals else []
 
     tmp = Path(tempfile.mkdtemp(prefix=".eval-", dir=out))
     try:
@@ -181,7 +183,7 @@ def run(args) -> int:
                 "frames": args.frames or "all", "seed": "scenario's" if args.seed is None else args.seed,
                 "start pose σ": args.pose_sigma, "jobs": args.jobs, "backend": args.backend,
                 "wall time": f"{wall:.0f} s"}
-        (tmp / "report.md").write_text(report_markdown(summary, goals, figures, meta, failed))
+        (tmp / "report.md").write_text(report_markdown(summary, goals, figures, meta, failed, caveats))
         for f in tmp.iterdir():
             os.replace(f, out / f.name)
     finally:
@@ -206,6 +208,8 @@ def run(args) -> int:
             met = "n/a" if g.met is None else ("[green]yes[/]" if g.met else "[red]no[/]")
             t.add_row(g.scenario, g.name, g.value, g.target, met)
         console.print(t)
+        for c in caveats:
+            console.print(f"note: {c}", highlight=False)
     console.print(f"{len(results)} runs in {wall:.1f} s wall time ({args.jobs} job(s), {args.backend}); wrote "
                   f"{out}/trials.jsonl, summary.json, summary.csv, report.md"
                   + (", nees_pose.png, ate.png, reobservation.png" if figures else ""))

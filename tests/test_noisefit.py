@@ -65,6 +65,11 @@ def test_calibrate_noise_on_a_simulated_run_writes_a_config(tmp_path, capsys):
     assert 0.0 < doc["noise"]["sigma_img"] < 0.5
     config = load_config(out)
     assert config.noise.sigma_img == doc["noise"]["sigma_img"]
+    # the lab's robot never turns on the spot: the per-radian odometry terms are not measured, not written,
+    # and the table says so instead of repeating the current value as an estimate
+    assert "rot_per_rad" not in doc.get("odometry", {})
+    row = next(line for line in text.splitlines() if "odometry.rot_per_rad" in line)
+    assert "not measured" in row
 
 
 @pytest.mark.parametrize(("argv", "message"), [

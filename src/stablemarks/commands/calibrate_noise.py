@@ -139,7 +139,7 @@ def run(args) -> int:
         trials.append((factor, after))
         if after.nees_pose <= 3.75:
             break
-    _print(console, current, estimated, samples, before, after, line_noise, trials)
+    _print(console, current, estimated, samples, before, after, line_noise, trials, doc)
     text = ("# stablemarks calibrate-noise: noise models estimated from " + ", ".join(args.sources) + "\n"
             + yaml.safe_dump(doc, sort_keys=False))
     tmp = out.with_name(f".{out.name}.tmp")
@@ -149,7 +149,7 @@ def run(args) -> int:
     return 0
 
 
-def _print(console, current, estimated, samples, before, after, line_noise=None, trials=()) -> None:
+def _print(console, current, estimated, samples, before, after, line_noise=None, trials=(), doc=None) -> None:
     from rich.table import Table
 
     t = Table(title=f"noise models from {samples.frames} frames: {len(samples.line_z)} lines on walls, "
@@ -161,14 +161,19 @@ def _print(console, current, estimated, samples, before, after, line_noise=None,
     def fmt(v):
         return "window/√12" if v is None else f"{v:.4g}"
 
+    def row(section, key, unit=""):
+        # a setting these recordings could not measure (no boundary found, no turn on the spot) is not in
+        # the file written: the filter keeps its current value
+        measured = doc is None or key in doc.get(section, {})
+        now, new = getattr(getattr(current, section), key), getattr(getattr(estimated, section), key)
+        t.add_row(f"{section}.{key}{unit}", fmt(now), fmt(new) if measured else "not measured")
+
     if line_noise:
         t.add_row("line noise per frame [px]", "", fmt(line_noise))
-    t.add_row("noise.sigma_img [px]", fmt(current.noise.sigma_img), fmt(estimated.noise.sigma_img))
-    t.add_row("noise.boundary_px [px]", fmt(current.noise.boundary_px), fmt(estimated.noise.boundary_px))
-    t.add_row("noise.free_boundary_px [px]", fmt(current.noise.free_boundary_px),
-              fmt(estimated.noise.free_boundary_px))
+    for key in ("sigma_img", "boundary_px", "free_boundary_px"):
+        row("noise", key, " [px]")
     for key in ("trans_per_m", "rot_per_m_deg", "rot_per_rad", "trans_per_rad"):
-        t.add_row(f"odometry.{key}", fmt(getattr(current.odometry, key)), fmt(getattr(estimated.odometry, key)))
+        row("odometry", key)
     console.print(t)
     c = Table(title=f"filter consistency over {before.runs} run(s), {before.frames} frames (pose NEES: mean over "
                     "all frames, inside: frames within one frame's 95 % bounds; NIS, landmark NEES: means and "

@@ -202,3 +202,29 @@ def test_a_boundary_at_the_silhouette_of_something_nearer_is_not_used():
     with_rule = found[0.5]
     assert not with_rule.boundaries and not any(c.selected for c in with_rule.candidates)
     assert any("silhouette of something nearer" in why for _, why in with_rule.rejected_boundaries)
+
+
+def test_ends_too_far_apart_that_the_pose_cannot_tell_apart_are_neither_used():
+    """The same corridor frame with a pose known only to 10 cm and 3°: both ends lie inside their gates against
+    the map's free edges, so the pose cannot tell which one is wrong; neither is used, and nothing is modelled
+    from that wall in this frame (office, fourth trial, frame 61: the end kept by the former rule was the wrong
+    one, and the seven landmarks modelled from it pulled the pose 3 cm off with NEES 275)."""
+    from stablemarks.evaluation import trial_seeds
+
+    sc = load_scenario("corridor")
+    source = SimulatedSource(simulate_run(sc, trial_seeds(sc.seed, 1)[0]))
+    cfg = Config().with_overrides({"noise": {"sigma_img": 0.06, "boundary_px": 0.5}})
+    cfg = cfg.with_source_defaults(source.config_defaults)
+    f = source.frame(5, 0.03213491023225945)
+    T = np.asarray(f.true_pose)
+    model = select_landmarks(run_front_end(f.left, f.right, cfg), cfg.camera(sc.camera).with_pan(f.pan), sc.map,
+                             T, np.diag([0.1, 0.1, np.radians(3.0)]) ** 2, cfg)
+    fired = 0
+    for pm in model.planes:
+        whys = [why for _, why in pm.rejected_boundaries if "both ends" in why]
+        if whys:
+            fired += 1
+            assert all("cannot tell" in why for why in whys)
+            assert len(whys) == 2 and not pm.boundaries
+            assert not any(c.selected for c in pm.candidates)
+    assert fired >= 1

@@ -223,3 +223,38 @@ def test_two_landmarks_on_one_line_in_a_wide_gate_wait_for_another(lab_seq, monk
     est = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
     assert (len(est.record.observed) == 2) is used
     assert any("were the only ones associated, their lines within one" in w for w in est.record.warnings) is not used
+
+
+def test_no_new_landmarks_on_a_wall_whose_landmarks_in_view_were_not_found(lab_seq):
+    """A wall modelled in a frame whose landmarks in view were none of them associated is closed to new landmarks
+    in that frame (the frame contradicts the filter there; its boundary would place duplicates of them elsewhere);
+    one associated landmark keeps it open, and the method enters nothing on a closed wall."""
+    from stablemarks.localizer import FrameRecord
+
+    seq = sm.open_sequence(lab_seq)
+    loc, estimates = loop(seq)
+    est = estimates[-1]
+    pan = seq.frame(N - 1).pan if hasattr(seq, "frame") else est.record.pan
+    model = est.model
+    modelled = {m.fit.plane.id for m in model.planes if m.boundaries}
+    in_view = {}
+    for i in loc.ekf.visible(pan, loc._max_incidence):
+        plane = loc.ekf.landmark_plane(i)
+        if plane is not None and plane.id in modelled:
+            in_view.setdefault(plane.id, []).append(i)
+    assert in_view, "the lab's last frame models a wall that holds landmarks in view"
+    record = FrameRecord(index=0, stamp=0.0, pan=pan, pan_command=pan, pose=loc.ekf.pose, cov_pose=loc.ekf.cov_pose,
+                         dead_reckoning=loc.ekf.pose)
+    closed = loc._walls_missed(model, [], pan, record)
+    assert closed == frozenset(in_view)
+    assert sum("no new landmarks are entered" in w for w in record.warnings) == len(in_view)
+    wall, ids = next(iter(in_view.items()))
+    assert wall not in loc._walls_missed(model, [(ids[0], 0)], pan, record)
+    # the method enters nothing on a closed wall, and the same candidates on an open one
+    on_wall = [c for c in model.selected if c.plane_id == wall]
+    if on_wall:
+        n0 = loc.ekf.n_landmarks
+        ekf = loc.ekf.copy()
+        entered = loc.method.enter(ekf, est.front, model, set(), loc.camera.with_pan(pan), seq.world_map, N,
+                                   loc.config, closed_planes=frozenset([wall]))
+        assert all(c.plane_id != wall for c in entered.candidates) and ekf.n_landmarks >= n0

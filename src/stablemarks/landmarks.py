@@ -1245,22 +1245,34 @@ def landmarks_on_plane(
     if len(boundaries) == 2:
         # Both ends found: the map fixes their distance, whatever the pose. One end snapped onto a line beyond
         # the wall (the corridor: a poster's far edge found 6 cm out, on a line of the wall behind it, so that
-        # the poster's own edge passed for a feature) makes it disagree; the end that agrees less with the map
-        # through the pose is not used.
+        # the poster's own edge passed for a feature) or inside it makes it disagree. Which end is wrong only the
+        # pose can tell: an end farther from the map's edge than its gate is not used (with the pose's
+        # covariance that gate already ran above), and when both lie inside their gates the pose cannot tell
+        # them apart (office, a turn: both ends within 3 σ of a heading 25 mrad uncertain, the one kept was the
+        # wrong one, and the seven landmarks modelled from it pulled the pose 3 cm off with NEES 275), so
+        # neither is used. Without a pose covariance the less certain end gives way, as before.
         b1, b2 = boundaries
         length = abs(float((b1.P - b2.P) @ fit.plane.direction))
         sigma = float(np.hypot(b1.sigma_along, b2.sigma_along))
         if abs(length - fit.plane.length) > config.boundary_gate_sigma * sigma:
-            def score(b):
-                if cov_X is None:
-                    return b.sigma_along
-                off, sig = boundary_disagreement(b, fit.plane, fit.X, cov_X)
-                return abs(off) / sig
-            worse = max(boundaries, key=score)
-            boundaries.remove(worse)
-            rejected.append((worse, f"plane {fit.plane.label!r}: the boundaries found at both ends are "
-                                    f"{100 * length:.1f} cm apart, the map's wall {100 * fit.plane.length:.1f} cm "
-                                    f"(σ {100 * sigma:.1f} cm): the one at {worse.edge} is not used"))
+            why = (f"plane {fit.plane.label!r}: the boundaries found at both ends are {100 * length:.1f} cm apart, "
+                   f"the map's wall {100 * fit.plane.length:.1f} cm (σ {100 * sigma:.1f} cm)")
+            if cov_X is None:
+                worse = max(boundaries, key=lambda b: b.sigma_along)
+                boundaries.remove(worse)
+                rejected.append((worse, f"{why}: the one at {worse.edge} is not used"))
+            else:
+                z = [abs(off) / sig for off, sig in (boundary_disagreement(b, fit.plane, fit.X, cov_X)
+                                                     for b in boundaries)]
+                out = [b for b, zi in zip(boundaries, z, strict=True) if zi > config.boundary_gate_sigma]
+                if not out:  # both fit the pose: it cannot tell which is wrong
+                    out = list(boundaries)
+                    why += ": the pose cannot tell which end is wrong, neither is used"
+                else:
+                    why += f": the one at {out[0].edge} is off the map's edge, not used"
+                for b in out:
+                    boundaries.remove(b)
+                    rejected.append((b, why))
     if not boundaries:
         return PlaneLandmarks(fit, [], members, [], rejected, searched)
     ref = min(boundaries, key=lambda b: b.sigma_along)

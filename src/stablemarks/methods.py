@@ -105,9 +105,12 @@ class Method:
         return keep, dropped
 
     def enter(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, used_pairs: set[int],
-              camera: StereoCamera, world_map: Map, frame: int, config: Config) -> Entered:
-        """Enter the frame's new wall landmarks, jointly per boundary (:func:`enter_wall_landmarks`)."""
-        fresh = [c for c in self.take(model) if c.pair not in used_pairs and not is_duplicate(ekf, c)]
+              camera: StereoCamera, world_map: Map, frame: int, config: Config, *,
+              closed_planes: frozenset[str] = frozenset()) -> Entered:
+        """Enter the frame's new wall landmarks, jointly per boundary (:func:`enter_wall_landmarks`), on every wall
+        but ``closed_planes`` (ids of walls whose landmarks in view this frame did not find)."""
+        fresh = [c for c in self.take(model) if c.pair not in used_pairs and c.plane_id not in closed_planes
+                 and not is_duplicate(ekf, c)]
         pairs = front.kept_pairs
         polarity = front.left_segments.polarity[pairs.left_index]
         centre = camera.optical_centres(ekf.pose)[0]
@@ -133,7 +136,8 @@ class AllSegments(Method):
     def model(self, front, camera, world_map, X, cov_X, config) -> None:
         return None
 
-    def enter(self, ekf, front, model, used_pairs, camera, world_map, frame, config) -> Entered:
+    def enter(self, ekf, front, model, used_pairs, camera, world_map, frame, config, *,
+              closed_planes=frozenset()) -> Entered:
         pairs = front.kept_pairs
         idx = [j for j in range(len(pairs)) if j not in used_pairs]
         ids = enter_point_landmarks(ekf, camera, pairs, idx, frame)

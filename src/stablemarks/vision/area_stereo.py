@@ -727,28 +727,42 @@ def _best_in(costs, cb, k0, k1, scale, jvec):  # pragma: no cover - numba
 
 @njit(**_NJ)
 def _seconds(costs, key_left, j_right, second_left, second_right, segs, n_seg, off, stride, jlane, mask, top, rneed,
-             n_rneed):  # fmt: skip
+             n_rneed, lneed, n_lneed):  # fmt: skip
     """The smallest cost outside the winner's j ± 1 (``top``: none) over the row's cost segments (columns [x0, x1),
     lanes [k0, k1) each), for the left pixels (``second_left[x]``, winners' keys ``key_left``) and along the
     diagonals for the right pixels (``second_right``, a running minimum, winners ``j_right``, both at
-    ``x + off + k``) — the latter only in the columns of ``rneed[:n_rneed]`` (sorted disjoint column ranges
-    [c0, c1): those whose diagonals reach a requested right pixel, :func:`_right_needs`; elsewhere no right
-    pixel's test reads it). Arrays in the cost dtype; ``jlane[k]`` is lane k's disparity index; "outside j ± 1" is
+    ``x + off + k``). Each only where a test reads it: the left pixels' in the columns of ``lneed[:n_lneed]`` (the
+    requested left pixels whose tests run, :func:`_left_tests`), the right pixels' in those of ``rneed[:n_rneed]``
+    (those whose diagonals reach a requested right pixel, :func:`_right_needs`); both sorted disjoint column ranges
+    [c0, c1). Arrays in the cost dtype; ``jlane[k]`` is lane k's disparity index; "outside j ± 1" is
     ``(jlane − j + 1) mod 2^16 > 2``."""
     for s in range(n_seg):
-        x0, x1, k0, k1 = _u64(segs[s, 0]), _u64(segs[s, 1]), _u64(segs[s, 2]), _u64(segs[s, 3])
+        x0, x1, k0, k1 = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
         pos = x0
-        for t in range(n_rneed):
-            a, b = max(pos, _u64(max(rneed[t, 0], 0))), min(x1, _u64(max(rneed[t, 1], 0)))
-            if a >= b:
-                continue
-            if pos < a:
-                _second_left(costs, key_left, second_left, pos, a, k0, k1, stride, jlane, mask, top)
-            _second_both(costs, key_left, j_right, second_left, second_right, a, b, k0, k1, off, stride, jlane, mask,
-                         top)  # fmt: skip
-            pos = b
-        if pos < x1:
-            _second_left(costs, key_left, second_left, pos, x1, k0, k1, stride, jlane, mask, top)
+        il = 0
+        ir = 0
+        while pos < x1:
+            # the stretch [pos, end) over which it is the same whether a left and whether a right pixel needs it
+            while il < n_lneed and lneed[il, 1] <= pos:
+                il += 1
+            while ir < n_rneed and rneed[ir, 1] <= pos:
+                ir += 1
+            in_l = il < n_lneed and lneed[il, 0] <= pos
+            in_r = ir < n_rneed and rneed[ir, 0] <= pos
+            end = x1
+            if il < n_lneed:
+                end = min(end, lneed[il, 1] if in_l else lneed[il, 0])
+            if ir < n_rneed:
+                end = min(end, rneed[ir, 1] if in_r else rneed[ir, 0])
+            a, b = _u64(pos), _u64(end)
+            if in_l and in_r:
+                _second_both(costs, key_left, j_right, second_left, second_right, a, b, _u64(k0), _u64(k1), off,
+                             stride, jlane, mask, top)  # fmt: skip
+            elif in_l:
+                _second_left(costs, key_left, second_left, a, b, _u64(k0), _u64(k1), stride, jlane, mask, top)
+            elif in_r:
+                _second_right(costs, j_right, second_right, a, b, _u64(k0), _u64(k1), off, stride, jlane, top)
+            pos = end
 
 
 @njit(**_NJ)
@@ -783,6 +797,20 @@ def _second_both(costs, key_left, j_right, second_left, second_right, x0, x1, k0
                 near_right = np.uint16(jlane[k] - j_right[rb + k] + 1) <= 2
                 second_right[rb + k] = min(second_right[rb + k], max(c, costs.dtype.type(near_right * top)))
             second_left[x] = second
+
+
+@njit(**_NJ)
+def _second_right(costs, j_right, second_right, x0, x1, k0, k1, off, stride, jlane, top):  # pragma: no cover - numba
+    """:func:`_seconds` of the right pixels over columns [x0, x1), lanes [k0, k1): :func:`_second_both` without the
+    left pixels' part."""
+    for phase in range(_u64(_PHASES)):
+        for x in range(x0 + phase, x1, _u64(_PHASES)):
+            cb = x * stride
+            rb = x + off
+            for k in range(k0, k1):
+                c = costs[cb + k]
+                near_right = np.uint16(jlane[k] - j_right[rb + k] + 1) <= 2
+                second_right[rb + k] = min(second_right[rb + k], max(c, costs.dtype.type(near_right * top)))
 
 
 @njit(**_NJ)
@@ -1034,6 +1062,7 @@ def _sad_kernel(  # pragma: no cover - numba
     levels = np.zeros((n_levels, n_cols), tex_probe.dtype)  # for _window_sums
     scratch_i = np.empty((3, n_cols), np.int64)
     rneed = np.empty((n_cols + 1, 2), np.int64)  # for _right_needs
+    lneed = np.empty((n_cols + 1, 2), np.int64)  # for _seconds
     scratch_f = np.empty((1, n_cols), np.float64)
     # left columns with every lane's window inside, right pixels likewise
     lo_left, hi_left = max(r, r + max_disp), min(n_cols - 1 - r, n_cols - 1 - r + min_disp)
@@ -1115,8 +1144,15 @@ def _sad_kernel(  # pragma: no cover - numba
                         key_left[x] = _best_in(costs, _u64(x * stride), _u64(k0), _u64(k1), scale, jvec)
         if track:
             n_rneed = _right_needs(rrun, min_disp, max_disp, rneed)
+            n_lneed = 0  # the requested left pixels whose tests run (below)
+            for t in range(lrun.shape[0]):
+                a, b = max(lrun[t, 0], lo_left), min(lrun[t, 1], hi_left + 1)
+                if a < b:
+                    lneed[n_lneed, 0] = a
+                    lneed[n_lneed, 1] = b
+                    n_lneed += 1
             _seconds(costs, key_left, j_right, second_left, second_right, segs, n_seg, _u64(off), _u64(stride), jlane,
-                     scale - 1, top, rneed, n_rneed)  # fmt: skip
+                     scale - 1, top, rneed, n_rneed, lneed, n_lneed)  # fmt: skip
         row = y * n_cols
         for t in range(lrun.shape[0]):
             a, b = max(lrun[t, 0], lo_left), min(lrun[t, 1], hi_left + 1)

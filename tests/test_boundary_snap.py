@@ -228,3 +228,39 @@ def test_ends_too_far_apart_that_the_pose_cannot_tell_apart_are_neither_used():
             assert len(whys) == 2 and not pm.boundaries
             assert not any(c.selected for c in pm.candidates)
     assert fired >= 1
+
+
+def test_boundaries_of_two_walls_whose_distance_the_map_contradicts_are_neither_used():
+    """The distance between two free edges seen in one frame does not depend on the pose: two boundaries of
+    different walls found where the map's distance between their edges cannot be are not both right, and the pose
+    (each already fits it) cannot tell which, so neither is used; both moved together (a pose error) pass."""
+    from types import SimpleNamespace
+
+    from stablemarks.landmarks import LandmarkConfig, boundaries_apart
+
+    sc = load_scenario("lab")
+    partition, board = sc.map["partition"], sc.map["whiteboard"]
+    cov = np.diag([0.01, 0.01]) ** 2
+
+    def models(shift_a, shift_b):
+        def model(plane, edge, shift):
+            b = SimpleNamespace(P=plane.edge(edge) + np.asarray(shift, float), cov=cov, edge=edge)
+            return SimpleNamespace(fit=SimpleNamespace(plane=plane), boundaries=[b])
+        return [model(partition, "p1", shift_a), model(board, "p1", shift_b)]
+
+    config = LandmarkConfig()
+    assert boundaries_apart(models((0, 0), (0, 0)), config) == {}
+    assert boundaries_apart(models((0.12, -0.05), (0.12, -0.05)), config) == {}  # the pose's error: both alike
+    u = board.edge("p1") - partition.edge("p1")
+    u /= np.hypot(*u)
+    n = np.array([-u[1], u[0]])
+    assert boundaries_apart(models((0, 0), 0.03 * u), config) == {}  # 3 cm: inside 3 σ of the distance (4.2 cm)
+    assert boundaries_apart(models((0, 0), 0.10 * n), config) == {}  # across the line joining them: not seen
+    apart = boundaries_apart(models((0, 0), 0.10 * u), config)
+    assert set(apart) == {("partition", "p1"), ("whiteboard", "p1")}
+    assert all("neither is used" in why for why in apart.values())
+    # two ends of one wall are landmarks_on_plane's to check, not this
+    one = SimpleNamespace(fit=SimpleNamespace(plane=partition), boundaries=[
+        SimpleNamespace(P=partition.edge("p1"), cov=cov, edge="p1"),
+        SimpleNamespace(P=partition.edge("p2") + 0.2, cov=cov, edge="p2")])
+    assert boundaries_apart([one], config) == {}

@@ -1137,6 +1137,7 @@ def landmarks_on_plane(
     border_sigma_px: float | tuple[float | None, float | None] | None = None,
     disparity_left: np.ndarray | None = None,
     disparity_range: tuple[float, float] | None = None,
+    unusable: dict[str, str] | None = None,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection.
 
@@ -1229,6 +1230,9 @@ def landmarks_on_plane(
         b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px,
                             border_sigma_px, bridge)
         if b is None:
+            continue
+        if unusable and edge in unusable:  # found, but known not to be usable in this frame (boundaries_apart)
+            rejected.append((b, unusable[edge]))
             continue
         if disparity_left is not None and config.nearer_fraction < 1.0 and \
                 occluded_boundary(camera, fit, disparity_left, b, window_px, config.nearer_fraction):
@@ -1588,6 +1592,38 @@ def boundary_disagreement(b: Boundary, plane, X, cov_X) -> tuple[float, float]:
     J = np.array([[1.0, 0.0, -(b.P[1] - X[1])], [0.0, 1.0, b.P[0] - X[0]]])  # ∂P/∂(x, y, θ)
     Jt = t @ J
     return off, float(np.sqrt(b.sigma_along**2 + Jt @ np.asarray(cov_X, dtype=float) @ Jt))
+
+
+def boundaries_apart(models: list[PlaneLandmarks], config: LandmarkConfig) -> dict[tuple[str, str], str]:
+    """Boundaries of different walls found in one frame whose distance disagrees with the map's: ``{(plane id,
+    edge): why}`` for each boundary not to be used.
+
+    The distance between two points seen in one frame does not depend on the pose, and the map fixes the distance
+    between two free edges: two boundaries whose distance differs from their edges' by more than
+    ``boundary_gate_sigma`` σ (their covariances along the line joining them) cannot both be right. Each was
+    already checked against the map through the pose (:func:`boundary_disagreement`); both fit it, so the pose
+    cannot tell which is wrong, and neither is used (the storeroom's doorway, after a blind stretch with the
+    position 17 cm off: its two jambs found 18 cm out either way, one on the wall beyond the door, and the
+    landmarks modelled from them held the pose 10 cm off with NEES 143). The two ends of one wall are checked
+    the same way in :func:`landmarks_on_plane`."""
+    found = [(m.fit.plane, b) for m in models for b in m.boundaries]
+    out: dict[tuple[str, str], str] = {}
+    for i, (plane_i, bi) in enumerate(found):
+        for plane_j, bj in found[i + 1:]:
+            if plane_i.id == plane_j.id:
+                continue
+            d = bj.P - bi.P
+            d_map = plane_j.edge(bj.edge) - plane_i.edge(bi.edge)
+            n, n_map = float(np.hypot(*d)), float(np.hypot(*d_map))
+            u = d / n if n > 1e-9 else (d_map / n_map if n_map > 1e-9 else np.array([1.0, 0.0]))
+            sigma = float(np.sqrt(u @ (bi.cov + bj.cov) @ u))
+            if abs(n - n_map) > config.boundary_gate_sigma * sigma:
+                why = (f"the boundaries found at {plane_i.label!r} {bi.edge} and {plane_j.label!r} {bj.edge} are "
+                       f"{100 * n:.1f} cm apart, the map's free edges {100 * n_map:.1f} cm (σ {100 * sigma:.1f} cm): "
+                       "the pose cannot tell which is wrong, neither is used")
+                for plane, b in ((plane_i, bi), (plane_j, bj)):
+                    out.setdefault((plane.id, b.edge), f"plane {plane.label!r}: {why}")
+    return out
 
 
 def mapped_boundaries(plane, boundaries: list[Boundary], ref: Boundary) -> list[Boundary]:

@@ -34,7 +34,7 @@ from numba import njit
 from .config import Config
 from .errors import ImageError, expected
 from .geometry import StereoCamera
-from .landmarks import Candidate, PlaneLandmarks, landmarks_on_plane, off_wall_by_lines
+from .landmarks import Candidate, PlaneLandmarks, boundaries_apart, landmarks_on_plane, off_wall_by_lines
 from .maps import Map
 from .planes import FailedFit, PlaneFit, PlanePrediction, fit_plane, predict_planes
 from .vision.area_stereo import (
@@ -708,6 +708,13 @@ def select_landmarks(
     columns = (lazy.found(0), lazy.found(1)) if lazy is not None else valid_columns(front.disparity)
     fits, models = [], []
     t_fit = t_model = 0.0
+    plane_args = dict(camera=camera, pairs=pairs, left_segments=front.left_segments,
+                      disparity_right=front.disparity.right, config=config.landmarks, plane_config=config.planes,
+                      window_px=float(config.sad.block_size), valid_columns=columns, world_map=world_map, cov_X=cov_X,
+                      border_sigma_px=(config.noise.boundary_px, config.noise.free_boundary_px),
+                      disparity_left=front.disparity.left,
+                      disparity_range=(float(config.sad.min_disparity),
+                                       float(config.sad.min_disparity + config.sad.num_disparities - 1)))
     for pred in preds:
         ta = time.perf_counter()
         fit = fit_plane(camera, X, front.disparity.left, pred, config.planes)
@@ -720,18 +727,24 @@ def select_landmarks(
                 f"(columns {pred.window[0]}–{pred.window[1]}): {fit.reason}"
             )
             continue
-        model = landmarks_on_plane(camera, fit, pairs, front.left_segments, front.disparity.right,
-                                   config.landmarks, config.planes, float(config.sad.block_size),
-                                   columns, world_map, cov_X=cov_X,
-                                   border_sigma_px=(config.noise.boundary_px, config.noise.free_boundary_px),
-                                   disparity_left=front.disparity.left,
-                                   disparity_range=(float(config.sad.min_disparity),
-                                                    float(config.sad.min_disparity + config.sad.num_disparities - 1)))
+        model = landmarks_on_plane(**{**plane_args, "fit": fit})
         warnings += [why for _, why in model.rejected_boundaries]
         t_model += time.perf_counter() - tb
         if fit.plane.free_edges and not model.boundaries:
             warnings.append(f"plane {fit.plane.label!r}: no free edge found in view; its features are not modelled")
         models.append(model)
+    # boundaries of different walls whose distance the map contradicts: neither is used (landmarks.boundaries_apart);
+    # their walls are modelled again without them
+    apart = boundaries_apart(models, config.landmarks)
+    if apart:
+        for n, m in enumerate(models):
+            skip = {edge: why for (plane_id, edge), why in apart.items() if plane_id == m.fit.plane.id}
+            if skip:
+                models[n] = landmarks_on_plane(**{**plane_args, "fit": m.fit, "unusable": skip})
+                warnings += [why for _, why in models[n].rejected_boundaries if why in skip.values()]
+                if m.fit.plane.free_edges and not models[n].boundaries:
+                    warnings.append(f"plane {m.fit.plane.label!r}: no free edge found in view; its features are not "
+                                    "modelled")
     # walls whose own lines scatter about their fit give nothing; then the off-wall test once more with the line
     # noise the frame's own lines show, when below the model's (landmarks.off_wall_by_lines)
     before = [len(m.rejected_boundaries) for m in models]

@@ -59,7 +59,7 @@ def test_select_landmarks_reads_sigma_img_from_the_configuration(monkeypatch):
     monkeypatch.setattr(pipeline, "predict_planes", lambda cam, *a, **k: seen.append(cam.sigma_img) or [])
     wide = Config().with_overrides({"noise": {"sigma_img": 1.5}})
     empty = np.full((4, 4), np.inf)
-    front = SimpleNamespace(kept_pairs=None, disparity=SimpleNamespace(left=empty, right=empty))
+    front = SimpleNamespace(kept_pairs=None, left_segments=[], disparity=SimpleNamespace(left=empty, right=empty))
     select_landmarks(front, StereoCamera(), MAP, X, COV, wide)
     assert seen == [1.5]
 

@@ -541,6 +541,103 @@ def _right_block(prediction, disparity_right: np.ndarray, row_margin: float = 0.
                                prediction.band_table, float(prediction.gate), float(row_margin))
 
 
+def _right_box(prediction, disparity_right: np.ndarray, row_margin: float = 0.0,
+               columns: tuple[int, int] | None = None) -> tuple[np.ndarray, int, int]:
+    """:func:`_right_block`'s box without its mask: ``(sub, v0, c0)``, ``sub`` the right disparities of the block's
+    rows ``v0 …`` and columns ``c0 …`` (an empty (0, 0) box where :func:`_right_block` gives an empty block)."""
+    H, W = disparity_right.shape
+    c0, c1 = (0, W - 1) if columns is None else (max(0, int(columns[0])), min(W - 1, int(columns[1])))
+    if c1 < c0:
+        return disparity_right[:0, :0], 0, 0
+    v0 = max(0, int(np.floor(prediction.v_top.min() - row_margin)))
+    v1 = min(H - 1, int(np.ceil(prediction.v_bottom.max() + row_margin)))
+    if v1 < v0:
+        return disparity_right[:0, :0], 0, 0
+    return disparity_right[v0 : v1 + 1, c0 : c1 + 1], v0, c0
+
+
+def _right_boundary_columns(prediction, sub: np.ndarray, v0: int, c0: int, W: int, lo: float, hi: float,
+                            outward: int, max_hole: int, row_margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """``_block_boundary_columns(block, v0, c0, W, lo, hi, outward, max_hole)`` of the right region's block
+    ``_right_block`` makes of the box ``sub`` (:func:`_right_box`), without making it: each pixel's band test
+    (:func:`_right_band`'s, the same arithmetic) done where the row walk reads it (:func:`_right_row_ends`); the
+    walk stops at each row's end, so the pixels beyond it (about half a search window) are never tested."""
+    lo_c = math.floor(min(max(lo, 0), W - 1))
+    hi_c = math.ceil(min(max(hi, 0), W - 1))
+    if hi_c < lo_c:
+        return np.zeros(0, int), np.zeros(0)
+    return _right_row_ends(sub, int(c0), int(v0), int(prediction.columns[0]), prediction.band_table,
+                           float(prediction.gate), float(row_margin), lo_c, hi_c, int(outward), int(max_hole))
+
+
+@njit(cache=True, inline="always")
+def _right_pixel(sub, i, k, c0, v0, u0, table, gate, row_margin):  # pragma: no cover - numba
+    """:func:`_right_band`'s value at ``(i, k)`` of the box ``sub``: the same tests and interpolation."""
+    K = table.shape[0]
+    u_last = u0 + K - 1
+    v = float(v0 + i)
+    disp = float(sub[i, k])
+    u = float(c0 + k) + disp
+    if not (u >= u0 and u <= u_last):  # also NaN
+        return False
+    j = int(u - u0)
+    if j == K - 1:
+        return (abs(disp - table[j, 0]) <= gate * table[j, 2] and v >= table[j, 4] - row_margin
+                and v <= table[j, 6] + row_margin)
+    frac = u - float(u0 + j)
+    dp = table[j, 1] * frac + table[j, 0]
+    sp = table[j, 3] * frac + table[j, 2]
+    if not abs(disp - dp) <= gate * sp:
+        return False
+    vt = table[j, 5] * frac + table[j, 4]
+    vb = table[j, 7] * frac + table[j, 6]
+    return v >= vt - row_margin and v <= vb + row_margin
+
+
+@njit(cache=True)
+def _right_row_ends(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole):  # pragma: no cover
+    """:func:`_block_row_ends` (window columns ``w0 … w1``) of the block :func:`_right_band` makes of ``sub`` (rows
+    ``v0 …``, columns ``c0 …``), each pixel tested (:func:`_right_pixel`) only when the walk reads it: the same
+    walk, the same rows and columns."""
+    h, w = sub.shape
+    n = w1 - w0 + 1
+    first = w1 if outward < 0 else w0
+    step = -1 if outward < 0 else 1
+    rows = np.empty(h, dtype=np.int64)
+    cols = np.empty(h, dtype=np.float64)
+    k = 0
+    for i in range(h):
+        start = n
+        for j in range(n):
+            c = first + step * j - c0
+            if 0 <= c < w and _right_pixel(sub, i, c, c0, v0, u0, table, gate, row_margin):
+                start = j
+                break
+        last = -1
+        j = start + 1
+        while j < n:
+            c = first + step * j - c0
+            if 0 <= c < w and _right_pixel(sub, i, c, c0, v0, u0, table, gate, row_margin):
+                j += 1
+                continue
+            q = j + 1
+            while q < n and q - j <= max_hole:
+                c = first + step * q - c0
+                if 0 <= c < w and _right_pixel(sub, i, c, c0, v0, u0, table, gate, row_margin):
+                    break
+                q += 1
+            if q < n and q - j <= max_hole:
+                j = q
+            else:
+                last = j - 1
+                break
+        if last >= 0:
+            rows[k] = v0 + i
+            cols[k] = float(first + step * last)
+            k += 1
+    return rows[:k].copy(), cols[:k].copy()
+
+
 @njit(cache=True)
 def _right_band(sub, c0, v0, u0, table, gate, row_margin):  # pragma: no cover - numba
     """:func:`right_region` on the box ``sub`` (h, w) of right disparities at rows ``v0…``, columns ``c0…``,
@@ -627,9 +724,10 @@ def search_boundary(
     regions = [(fit.region[v0:max(v0, v1)], v0, 0), None]
     if disparity_right is not None and np.all(np.isfinite(e.u)):
         lo_r, hi_r = e.window(1, config.search_sigma)
-        rv0, rc0, block = _right_block(pred, disparity_right, plane_config.row_margin_px,
-                                       (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
-        regions[1] = (block, rv0, rc0)
+        # the right region's block is not made: its pixels are tested as the row walk reads them
+        # (_right_row_ends; _right_block's box and edge cases)
+        regions[1] = _right_box(pred, disparity_right, plane_config.row_margin_px,
+                                (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
     outwards = [-1 if e.u[img] < u_inner[img] else 1 for img in (0, 1)]
     right_found = True
     for img in (0, 1):
@@ -641,8 +739,12 @@ def search_boundary(
             n_rows = 0
         else:
             block, bv0, bu0 = regions[img]
-            _, cols = _block_boundary_columns(block, bv0, bu0, disparity_right.shape[1] if img else W, lo, hi,
-                                              outward, int(w // 2) if bridge_px is None else int(bridge_px))
+            hole = int(w // 2) if bridge_px is None else int(bridge_px)
+            if img == 0:
+                _, cols = _block_boundary_columns(block, bv0, bu0, W, lo, hi, outward, hole)
+            else:
+                _, cols = _right_boundary_columns(pred, block, bv0, bu0, disparity_right.shape[1], lo, hi, outward,
+                                                  hole, plane_config.row_margin_px)
             # robust_rows, then minimum_variance_column of the rows kept, in one numba call
             n_rows, m, var = _robust_minimum_variance(cols, float(config.row_outlier_mad), float(lo), float(hi))
         if n_rows < config.min_boundary_rows:
@@ -1138,6 +1240,7 @@ def landmarks_on_plane(
     disparity_left: np.ndarray | None = None,
     disparity_range: tuple[float, float] | None = None,
     unusable: dict[str, str] | None = None,
+    memo: dict | None = None,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection.
 
@@ -1155,10 +1258,21 @@ def landmarks_on_plane(
     outside it (``search_sigma`` σ) is not searched: block matching finds nothing there, and the wall's region
     ends where the wall leaves the range, not at its edge (a camera with f·b = 98 px·m and 64 disparities sees
     nothing nearer than 1.5 m: a free-standing panel's end 1.2 m away was found 21 cm inside it).
+    ``memo``: a dict (empty at first) passed again with the same ``fit`` and the same other arguments, ``unusable``
+    aside: what does not depend on ``unusable`` (the gate, the members, each edge's search and checks, the
+    features modelled from one boundary, each line's nearer-side test, the silhouettes) is taken from the earlier
+    call instead of computed again (:func:`~stablemarks.pipeline.select_landmarks` models a wall again without
+    boundaries :func:`boundaries_apart` flags: ~1 ms a wall). The result is the one computed afresh.
     """
+    if memo is None:
+        memo = {}
+    elif memo.setdefault("fit", fit) is not fit:
+        raise ValueError("landmarks_on_plane: memo was made for another fit")
     if cov_X is not None:
-        cov_map = world_map.accuracy_cov if world_map is not None else np.zeros((2, 2))
-        m2, m2_slope = fit_disagreements(camera, fit, cov_X, cov_map)
+        if "gate" not in memo:
+            cov_map = world_map.accuracy_cov if world_map is not None else np.zeros((2, 2))
+            memo["gate"] = fit_disagreements(camera, fit, cov_X, cov_map)
+        m2, m2_slope = memo["gate"]
         if m2 > config.fit_gate_chi2:
             # A wall turned from the map (a wrong pan turns every wall like this): its free edges in view were
             # expected and are not found. A wall merely shifted (a slip, a kidnap) is left to the widened search.
@@ -1174,77 +1288,40 @@ def landmarks_on_plane(
                        f"{config.fit_gate_chi2:g} with the pose's uncertainty): another surface in its band, "
                        "not used")],
                 in_view, "turned" if turned else "shifted")
-    members = plane_members(fit, pairs, left_segments, plane_config)
-    # A wall in line with another (two partitions in a row) shares its plane: segments beyond the wall's ends
-    # fit it too. Only those between the two ends' search windows are the wall's.
-    lo, hi = wall_columns(camera, fit, config.search_sigma)
-    members = members & (pairs.u_left >= lo) & (pairs.u_left <= hi)
-    idx = np.flatnonzero(members)
-    members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
+    if "members" not in memo:
+        members = plane_members(fit, pairs, left_segments, plane_config)
+        # A wall in line with another (two partitions in a row) shares its plane: segments beyond the wall's ends
+        # fit it too. Only those between the two ends' search windows are the wall's.
+        lo, hi = wall_columns(camera, fit, config.search_sigma)
+        members = members & (pairs.u_left >= lo) & (pairs.u_left <= hi)
+        idx = np.flatnonzero(members)
+        members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
+        memo["members"] = members, idx, members_u
+    members, idx, members_u = memo["members"]
     boundaries, rejected, searched = [], [], []
     w_sad = boundary_window(config, window_px)
     for edge in fit.plane.free_edges:
-        e = fit.prediction.edges[edge]
-        if not np.all(np.isfinite(e.u)):  # the edge is behind the camera
+        if ("edge", edge) not in memo:
+            memo[("edge", edge)] = _edge_search(camera, fit, edge, disparity_right, members_u, config, plane_config,
+                                                window_px, valid_columns, world_map, border_sigma_px,
+                                                disparity_range, w_sad)
+        found, rejected_before = memo[("edge", edge)]  # None: not searched; False: searched, not found
+        rejected += rejected_before
+        if found is None:
             continue
-        lo, hi = e.window(0, config.search_sigma)
-        if hi < 0 or lo > camera.width - 1:
-            continue
-        windows = [e.window(img, config.search_sigma) for img in (0, 1)]
-        if valid_columns is not None and any(
-            not (vc[0] + 1 < w[0] and w[1] < vc[1] - 1) for w, vc in zip(windows, valid_columns, strict=True)
-        ):
-            continue
-        if disparity_range is not None:
-            d, sd = fit.prediction.disparity_at(e.u[0])
-            d_lo, d_hi = float(d - config.search_sigma * sd), float(d + config.search_sigma * sd)
-            if d_hi > disparity_range[1] or d_lo < disparity_range[0]:
-                rejected.append((None, f"plane {fit.plane.label!r}: the wall's disparity at its free edge {edge} may "
-                                       f"be {d_lo:.0f}–{d_hi:.0f} px, beyond the {disparity_range[0]:g}–"
-                                       f"{disparity_range[1]:g} px block matching searches (sad.min_disparity, "
-                                       "sad.num_disparities): not searched"))
-                continue
-        incidence = edge_incidence(camera, fit.X, fit.plane, edge)
-        if incidence > math.radians(config.max_incidence_deg):
-            # the limit of the lines modelled from a boundary holds for the boundary too: its column error is
-            # stretched along the wall as much, and every landmark placed from it inherits that error (a warehouse
-            # aisle: an end seen at 72° placed its wall's landmarks 12–17 cm off, with σ of a few cm)
-            rejected.append((None, f"plane {fit.plane.label!r}: its free edge {edge} is seen "
-                                   f"{np.degrees(incidence):.0f}° from the wall's normal (more than "
-                                   f"landmarks.max_incidence_deg, {config.max_incidence_deg:g}°): not searched"))
-            continue
-        if world_map is not None:
-            if edge_occluded(camera, fit.X, world_map, fit.plane, edge):
-                continue
-            step = edge_depth_step(camera, fit.X, world_map, fit.plane, edge, window_px / 2 + 1)
-            if abs(step) < config.min_edge_step_sigma * plane_config.sigma_nu(camera):
-                continue
-        bridge = None
-        if world_map is not None:
-            # a hole is followed across up to the whole window, but never across the gap to another wall of the
-            # map that would continue the region (less one window: each side's border fattens by half of it)
-            span = int(np.ceil(max(w_[1] - w_[0] for w_ in windows)))
-            gap = other_wall_gap(camera, fit, world_map, edge, config.search_sigma)
-            bridge = span if not np.isfinite(gap) else max(int(w_sad // 2), min(span, int(gap - w_sad)))
         searched.append(edge)
-        b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px,
-                            border_sigma_px, bridge)
-        if b is None:
+        if found is False:
             continue
+        b = found
         if unusable and edge in unusable:  # found, but known not to be usable in this frame (boundaries_apart)
             rejected.append((b, unusable[edge]))
             continue
-        if disparity_left is not None and config.nearer_fraction < 1.0 and \
-                occluded_boundary(camera, fit, disparity_left, b, window_px, config.nearer_fraction):
-            rejected.append((b, f"plane {fit.plane.label!r}: the boundary found at {edge} is the silhouette of "
-                                "something nearer standing in front of the wall, not its end: not used"))
+        if ("checked", edge) not in memo:
+            memo[("checked", edge)] = _boundary_checks(camera, fit, b, config, window_px, cov_X, disparity_left)
+        why = memo[("checked", edge)]
+        if why:
+            rejected.append((b, why))
             continue
-        if cov_X is not None:
-            off, sigma = boundary_disagreement(b, fit.plane, fit.X, cov_X)
-            if abs(off) > config.boundary_gate_sigma * sigma:
-                rejected.append((b, f"plane {fit.plane.label!r}: the boundary found at {edge} is {100 * off:+.1f} cm "
-                                    f"along the wall from the map's free edge (σ {100 * sigma:.1f} cm): not used"))
-                continue
         boundaries.append(b)
     if len(boundaries) == 2:
         # Both ends found: the map fixes their distance, whatever the pose. One end snapped onto a line beyond
@@ -1280,8 +1357,11 @@ def landmarks_on_plane(
     if not boundaries:
         return PlaneLandmarks(fit, [], members, [], rejected, searched)
     ref = min(boundaries, key=lambda b: b.sigma_along)
-    step = left_segments.contrast[pairs.left_index] / 4.0  # a Sobel_x response is 4× the step across an edge
-    cands = model_features(camera, fit, ref, pairs, idx, step, config)
+    features = memo.get("features")
+    if features is None or features[0] is not ref:  # the features modelled from this very boundary
+        step = left_segments.contrast[pairs.left_index] / 4.0  # a Sobel_x response is 4× the step across an edge
+        features = memo["features"] = ref, model_features(camera, fit, ref, pairs, idx, step, config)
+    cands = features[1]
     # An end of the wall not found in this frame (not free, out of the searchable part of the image, or
     # without a depth step) is still where the map puts it: the wall's length from the edge that was found.
     # Features near it are near a boundary too.
@@ -1290,20 +1370,95 @@ def landmarks_on_plane(
     if disparity_left is not None and config.nearer_fraction < 1.0:
         slope = left_segments.slope[pairs.left_index]
         chosen = [c for c in cands if c.selected]
-        sides = beside_nearer_sides(fit, disparity_left, [c.u_left for c in chosen], [c.v_top for c in chosen],
-                                    [c.v_bottom for c in chosen], [float(slope[c.pair]) for c in chosen],
-                                    window_px, config.nearer_fraction) if chosen else []
-        nearer = {id(c) for c, side in zip(chosen, sides, strict=True) if side}
+        # each line's side is its own (the lines are tested one by one): those tested in an earlier call are known
+        known = memo.setdefault("sides", {})
+        keys = [(c.u_left, c.v_top, c.v_bottom, float(slope[c.pair])) for c in chosen]
+        new = list(dict.fromkeys(k for k in keys if k not in known))
+        if new:
+            sides = beside_nearer_sides(fit, disparity_left, [k[0] for k in new], [k[1] for k in new],
+                                        [k[2] for k in new], [k[3] for k in new], window_px, config.nearer_fraction)
+            known.update(zip(new, sides.tolist(), strict=True))
+        nearer = {id(c) for c, k in zip(chosen, keys, strict=True) if known[k]}
         cands = [_replace(c, selected=False, reason=REASON_BESIDE_NEARER) if id(c) in nearer else c
                  for c in cands]
     if world_map is not None and cov_X is not None and config.nearer_fraction < 1.0 and any(c.selected for c in cands):
         # only the ends whose depth step the disparity test above cannot see: a step within the wall's band
-        band_px = float(fit.prediction.gate * median(fit.prediction.sigma_d)) + 1.0  # np.median, without its overhead
-        sil = nearer_silhouettes(camera, fit.X, cov_X, world_map, fit.plane, max_step_px=band_px)
+        if "silhouettes" not in memo:
+            band_px = float(fit.prediction.gate * median(fit.prediction.sigma_d)) + 1.0  # np.median, without overhead
+            memo["silhouettes"] = nearer_silhouettes(camera, fit.X, cov_X, world_map, fit.plane, max_step_px=band_px)
+        sil = memo["silhouettes"]
         cands = [_replace(c, selected=False, reason=REASON_BESIDE_NEARER)
                  if c.selected and _at_silhouette(camera, c, sil, config.boundary_sigma) else c
                  for c in cands]
     return PlaneLandmarks(fit, boundaries, members, cands, rejected, searched)
+
+
+def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right, members_u, config: LandmarkConfig,
+                 plane_config: PlaneConfig, window_px: float, valid_columns, world_map: Map | None, border_sigma_px,
+                 disparity_range, w_sad: float) -> tuple[Boundary | bool | None, list]:
+    """:func:`landmarks_on_plane`'s search of one free edge: whether it is searched and what is found, ``(found,
+    rejected)``: ``found`` None when the edge is not searched, False when searched and not found, else the
+    :func:`search_boundary` boundary; ``rejected`` the reasons (with no boundary) it was not searched for."""
+    e = fit.prediction.edges[edge]
+    if not np.all(np.isfinite(e.u)):  # the edge is behind the camera
+        return None, []
+    lo, hi = e.window(0, config.search_sigma)
+    if hi < 0 or lo > camera.width - 1:
+        return None, []
+    windows = [e.window(img, config.search_sigma) for img in (0, 1)]
+    if valid_columns is not None and any(
+        not (vc[0] + 1 < w[0] and w[1] < vc[1] - 1) for w, vc in zip(windows, valid_columns, strict=True)
+    ):
+        return None, []
+    if disparity_range is not None:
+        d, sd = fit.prediction.disparity_at(e.u[0])
+        d_lo, d_hi = float(d - config.search_sigma * sd), float(d + config.search_sigma * sd)
+        if d_hi > disparity_range[1] or d_lo < disparity_range[0]:
+            return None, [(None, f"plane {fit.plane.label!r}: the wall's disparity at its free edge {edge} may "
+                                 f"be {d_lo:.0f}–{d_hi:.0f} px, beyond the {disparity_range[0]:g}–"
+                                 f"{disparity_range[1]:g} px block matching searches (sad.min_disparity, "
+                                 "sad.num_disparities): not searched")]
+    incidence = edge_incidence(camera, fit.X, fit.plane, edge)
+    if incidence > math.radians(config.max_incidence_deg):
+        # the limit of the lines modelled from a boundary holds for the boundary too: its column error is
+        # stretched along the wall as much, and every landmark placed from it inherits that error (a warehouse
+        # aisle: an end seen at 72° placed its wall's landmarks 12–17 cm off, with σ of a few cm)
+        return None, [(None, f"plane {fit.plane.label!r}: its free edge {edge} is seen "
+                             f"{np.degrees(incidence):.0f}° from the wall's normal (more than "
+                             f"landmarks.max_incidence_deg, {config.max_incidence_deg:g}°): not searched")]
+    if world_map is not None:
+        if edge_occluded(camera, fit.X, world_map, fit.plane, edge):
+            return None, []
+        step = edge_depth_step(camera, fit.X, world_map, fit.plane, edge, window_px / 2 + 1)
+        if abs(step) < config.min_edge_step_sigma * plane_config.sigma_nu(camera):
+            return None, []
+    bridge = None
+    if world_map is not None:
+        # a hole is followed across up to the whole window, but never across the gap to another wall of the
+        # map that would continue the region (less one window: each side's border fattens by half of it)
+        span = int(np.ceil(max(w_[1] - w_[0] for w_ in windows)))
+        gap = other_wall_gap(camera, fit, world_map, edge, config.search_sigma)
+        bridge = span if not np.isfinite(gap) else max(int(w_sad // 2), min(span, int(gap - w_sad)))
+    b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px,
+                        border_sigma_px, bridge)
+    return (False if b is None else b), []
+
+
+def _boundary_checks(camera: StereoCamera, fit: PlaneFit, b: Boundary, config: LandmarkConfig, window_px: float,
+                     cov_X, disparity_left) -> str:
+    """Why :func:`landmarks_on_plane` does not use the boundary ``b`` it found (the silhouette of something nearer,
+    or too far from the map's edge for the pose), "" when it does."""
+    edge = b.edge
+    if disparity_left is not None and config.nearer_fraction < 1.0 and \
+            occluded_boundary(camera, fit, disparity_left, b, window_px, config.nearer_fraction):
+        return (f"plane {fit.plane.label!r}: the boundary found at {edge} is the silhouette of "
+                "something nearer standing in front of the wall, not its end: not used")
+    if cov_X is not None:
+        off, sigma = boundary_disagreement(b, fit.plane, fit.X, cov_X)
+        if abs(off) > config.boundary_gate_sigma * sigma:
+            return (f"plane {fit.plane.label!r}: the boundary found at {edge} is {100 * off:+.1f} cm "
+                    f"along the wall from the map's free edge (σ {100 * sigma:.1f} cm): not used")
+    return ""
 
 
 def nearer_silhouettes(camera: StereoCamera, X, cov_X, world_map: Map, plane, min_offset: float = 0.1,

@@ -706,7 +706,7 @@ def select_landmarks(
     lazy = getattr(front, "lazy", None)
     # valid_columns of the images as computed so far (the lazy images keep that answer up to date)
     columns = (lazy.found(0), lazy.found(1)) if lazy is not None else valid_columns(front.disparity)
-    fits, models = [], []
+    fits, models, memos = [], [], []
     t_fit = t_model = 0.0
     plane_args = dict(camera=camera, pairs=pairs, left_segments=front.left_segments,
                       disparity_right=front.disparity.right, config=config.landmarks, plane_config=config.planes,
@@ -727,7 +727,8 @@ def select_landmarks(
                 f"(columns {pred.window[0]}–{pred.window[1]}): {fit.reason}"
             )
             continue
-        model = landmarks_on_plane(**{**plane_args, "fit": fit})
+        memos.append({})  # what the wall's model computed, for modelling it again below without reading it anew
+        model = landmarks_on_plane(**{**plane_args, "fit": fit, "memo": memos[-1]})
         warnings += [why for _, why in model.rejected_boundaries]
         t_model += time.perf_counter() - tb
         if fit.plane.free_edges and not model.boundaries:
@@ -740,7 +741,7 @@ def select_landmarks(
         for n, m in enumerate(models):
             skip = {edge: why for (plane_id, edge), why in apart.items() if plane_id == m.fit.plane.id}
             if skip:
-                models[n] = landmarks_on_plane(**{**plane_args, "fit": m.fit, "unusable": skip})
+                models[n] = landmarks_on_plane(**{**plane_args, "fit": m.fit, "unusable": skip, "memo": memos[n]})
                 warnings += [why for _, why in models[n].rejected_boundaries if why in skip.values()]
                 if m.fit.plane.free_edges and not models[n].boundaries:
                     warnings.append(f"plane {m.fit.plane.label!r}: no free edge found in view; its features are not "

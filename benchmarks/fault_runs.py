@@ -12,6 +12,7 @@ out of frames.csv). The odometry is edited in its own frame: on lab (heading 90Â
 
     python benchmarks/fault_runs.py lab room corridor
     python benchmarks/fault_runs.py office --faults clean,kidnap,nopan --seed 7 --keep /tmp/faults
+    python benchmarks/fault_runs.py corridor --faults nopan,pan --config my.yaml
 """
 
 import argparse
@@ -69,10 +70,10 @@ def make_fault(clean: Path, fault: str, out: Path) -> tuple[Path | None, int | N
     return out, None
 
 
-def run_one(seq: Path, out: Path, jump: int | None) -> dict:
+def run_one(seq: Path, out: Path, jump: int | None, config: str | None = None) -> dict:
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        code = cli(["run", str(seq), "--out", str(out), "--no-figures"])
+        code = cli(["run", str(seq), "--out", str(out), "--no-figures", *(["--config", config] if config else [])])
     if code != 0:
         raise SystemExit(f"stablemarks run {seq} failed: {err.getvalue()}")
     lines = err.getvalue().splitlines()
@@ -100,6 +101,7 @@ def main() -> None:
     ap.add_argument("--faults", default=",".join(FAULTS), help=f"comma-separated, of {', '.join(FAULTS)}")
     ap.add_argument("--seed", type=int, help="seed of the runs (default: each scenario's own)")
     ap.add_argument("--keep", help="write the sequences and outputs here (default: a temporary folder)")
+    ap.add_argument("--config", help="configuration YAML for every run (default: the defaults)")
     args = ap.parse_args()
     faults = args.faults.split(",")
     unknown = [f for f in faults if f not in FAULTS]
@@ -117,7 +119,7 @@ def main() -> None:
                 if seq is None:
                     print(f"{sc.name + ' ' + fault:24s} (the run is too short for the jump)")
                     continue
-                m = run_one(seq, root / f"{sc.name}-{fault}-out", jump)
+                m = run_one(seq, root / f"{sc.name}-{fault}-out", jump, args.config)
                 first = "none" if m["first"] is None else f"frame {m['first'][0]} {m['first'][1]}"
                 after = f"{1000 * m['ate_after']:.1f} / {1000 * m['ate_dr_after']:.1f}" if jump else "-"
                 named = "-" if m["pan_named"] is None else f"frame {m['pan_named']}"

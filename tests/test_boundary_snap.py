@@ -258,7 +258,7 @@ def test_boundaries_of_two_walls_whose_distance_the_map_contradicts_are_neither_
     assert boundaries_apart(models((0, 0), 0.10 * n), config) == {}  # across the line joining them: not seen
     apart = boundaries_apart(models((0, 0), 0.10 * u), config)
     assert set(apart) == {("partition", "p1"), ("whiteboard", "p1")}
-    assert all("neither is used" in why for why in apart.values())
+    assert all("both are not used" in why for why in apart.values())
     # two ends of one wall are landmarks_on_plane's to check, not this
     one = SimpleNamespace(fit=SimpleNamespace(plane=partition), boundaries=[
         SimpleNamespace(P=partition.edge("p1"), cov=cov, edge="p1"),

@@ -21,6 +21,10 @@ def test_heading_drift_says_why():
     (rec,) = m.update(drift=(0.0, 0.0, "recoveries"), **quiet)
     assert rec.startswith("heading_drift: the images and the odometry disagreed in 3 of the last 20 frames")
     assert "pan" in rec and "dead reckoning" in rec
+    m = HealthMonitor(HealthConfig())
+    (rec,) = m.update(drift=(0.0, 0.0, "unconfirmed"), **quiet)
+    assert rec.startswith("heading_drift: the pose recovered in the last 20 frames")
+    assert "not confirmed" in rec and "pan" in rec and "dead reckoning" in rec
 
 
 @pytest.mark.parametrize(("key", "value"), [("max_recoveries", 0), ("recoveries_frames", 1.5)])

@@ -491,18 +491,22 @@ def fit_plane_reference(
 
 
 
+INDEPENDENT = {"planes": {"fit_covariance": "independent"}}
+"""The former pipeline's fitted-wall covariance (the clustered one came later and is tested in test_fit_covariance)."""
+
+
 def test_fit_plane_equals_the_reference(scenario_frames, scenario_models):
     """Every predicted plane of every scenario frame on its disparity image, cluttered and thinned (every failure
     too): the same fit bit for bit (line, covariance, χ², region) or the same failure."""
     rng = np.random.default_rng(89)
-    config = Config()
+    config = Config().with_overrides(INDEPENDENT)  # the reference predates planes.fit_covariance "clustered"
     n_fits = 0
     for frame, (_, _, front, model) in zip(scenario_frames, scenario_models, strict=True):
         camera = config.camera(frame[4])
         for pred in model.predictions:
             disp = np.array(front.disparity.left)
             for d in disparity_variants(disp, rng):
-                for pc in (config.planes, P.PlaneConfig(outlier_sigma=2.0, disparity_bias_px=0.03)):
+                for pc in (config.planes, P.PlaneConfig(outlier_sigma=2.0, disparity_bias_px=0.03, fit_covariance="independent")):
                     new = P.fit_plane(camera, model.X, d, pred, pc)
                     ref = fit_plane_reference(camera, model.X, d, pred, pc)
                     assert type(new) is type(ref)
@@ -728,7 +732,7 @@ def test_frame_equals_the_former_pipeline(scenario_frames, monkeypatch):
     update, with this pass's code and with every step it replaced swapped back: the same kept pairs, predictions,
     fits and regions, boundaries, candidates (their relative model's Jacobian and own σ to 1e-9), selection and
     reasons, and EKF state and covariance (to 1e-9: the landmarks' σ enter it)."""
-    config = Config()
+    config = Config().with_overrides(INDEPENDENT)
     new = _frame_outputs(scenario_frames, config)
     _frame_former(monkeypatch)
     old = _frame_outputs(scenario_frames, config)

@@ -40,7 +40,11 @@ condition's name first):
     over 30 frames, ATE three times dead reckoning's). It also holds when the pose had to be recovered
     (``odometry_disagrees``) in ``max_recoveries`` of the last ``recoveries_frames`` frames (a slip or a kidnap is
     an event; the images and the odometry disagreeing again and again is a wrong model: the corridor without its
-    pans, eight recoveries in 42 frames). From then on the estimate is dead reckoning (the pose
+    pans, eight recoveries in 42 frames), and when, after such a recovery within ``recoveries_frames`` frames, the
+    free edges are not found where the map puts them (``edges_not_found``): a pose recovered from a true slip puts
+    the walls back where the map has them, one recovered from lines seen under a wrong pan does not (the corridor
+    without its pans, with ``noise.boundary_px`` 0.5: one recovery at frame 30, the edges missed from frame 41 on,
+    and the recovered pose held 1.42 times dead reckoning's ATE). From then on the estimate is dead reckoning (the pose
     and its covariance from the start pose and the odometry alone: the images' history is not to be trusted) and
     nothing is associated, updated or entered; it holds for the rest of the run.
 """
@@ -144,6 +148,9 @@ MESSAGES = {
                      "({z:.1f} σ): " + _PAN_OR_ODOMETRY,
     "heading_drift_recoveries": "heading_drift: the images and the odometry disagreed in {r} of the last {rw} frames "
                                 "(each taken for a wheel slip or a kidnap): " + _PAN_OR_ODOMETRY,
+    "heading_drift_unconfirmed": "heading_drift: the pose recovered in the last {rw} frames (taken for a wheel slip or "
+                                 "a kidnap) was not confirmed: the free edges were then not found where the map puts "
+                                 "them: " + _PAN_OR_ODOMETRY,
 }
 
 
@@ -166,7 +173,7 @@ class HealthMonitor:
         ``edges_found``: whether the frame found its walls where the map puts them, which is what clears
         ``edges_not_found`` (default: not ``edges_missing``; a frame can be neither, e.g. one wall turned).
         ``drift``: ``(turn [deg], z)`` when the images turned the heading from the odometry's beyond
-        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on); a third item ``"recoveries"``
+        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on); a third item ``"recoveries"`` or ``"unconfirmed"``
         says it holds for too many recoveries instead.
         ``reinitialised``: the pose was re-initialised from the landmarks in this frame rather than its covariance
         widened (the sentence of ``odometry_disagrees`` says so)."""

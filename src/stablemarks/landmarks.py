@@ -1348,7 +1348,7 @@ def landmarks_on_plane(
                 out = [b for b, zi in zip(boundaries, z, strict=True) if zi > config.boundary_gate_sigma]
                 if not out:  # both fit the pose: it cannot tell which is wrong
                     out = list(boundaries)
-                    why += ": the pose cannot tell which end is wrong, neither is used"
+                    why += ": the pose cannot tell which end is wrong, so both are not used"
                 else:
                     why += f": the one at {out[0].edge} is off the map's edge, not used"
                 for b in out:
@@ -1775,7 +1775,7 @@ def boundaries_apart(models: list[PlaneLandmarks], config: LandmarkConfig) -> di
             if abs(n - n_map) > config.boundary_gate_sigma * sigma:
                 why = (f"the boundaries found at {plane_i.label!r} {bi.edge} and {plane_j.label!r} {bj.edge} are "
                        f"{100 * n:.1f} cm apart, the map's free edges {100 * n_map:.1f} cm (σ {100 * sigma:.1f} cm): "
-                       "the pose cannot tell which is wrong, neither is used")
+                       "the pose cannot tell which is wrong, so both are not used")
                 for plane, b in ((plane_i, bi), (plane_j, bj)):
                     out.setdefault((plane.id, b.edge), f"plane {plane.label!r}: {why}")
     return out

@@ -713,7 +713,7 @@ class Localizer:
         rechecked: dict = {}
         entered = Entered()
         method = self.method
-        nis_high = disagree = edges_missing = turned = reinitialised = recovering = False
+        nis_high = disagree = edges_missing = turned = reinitialised = recovering = pan_suspect = False
         edges_found = True
         if method.uses_vision:
             check_pair(np.asarray(left), np.asarray(right))
@@ -895,7 +895,8 @@ class Localizer:
             while self._recoveries and self._recoveries[0] <= k - h.recoveries_frames:
                 self._recoveries.popleft()
             drift = self._heading_drift() or \
-                ((0.0, 0.0, "recoveries") if len(self._recoveries) >= h.max_recoveries else None)
+                ((0.0, 0.0, "recoveries") if len(self._recoveries) >= h.max_recoveries else None) or \
+                ((0.0, 0.0, "unconfirmed") if self._recoveries and not recovering and pan_suspect else None)
         if drift is not None:
             # the images' heading has run away from the odometry's: fall back on dead reckoning (module health)
             self.ekf.reset_pose(self._dead_reckoning.as_array(), self._dr_cov)

@@ -24,8 +24,13 @@ import cv2
 import numpy as np
 from numba import njit
 
+from .errors import InputError, expected
 from .geometry import StereoCamera
 from .maps import Map, ReferencePlane, visible_parts
+
+
+FIT_COVARIANCES = ("clustered", "independent")
+"""How :func:`fit_plane` estimates the fitted line's covariance (``PlaneConfig.fit_covariance``)."""
 
 
 @dataclass(frozen=True)
@@ -47,6 +52,13 @@ class PlaneConfig:
     outlier_sigma: float = 3.0
     """Points farther than this many robust standard deviations (1.4826·MAD of the normalised residuals)
     from the line are not on the wall."""
+    fit_covariance: str = "clustered"
+    """How the fitted line's covariance is estimated. ``independent``: from the weighted least squares with one
+    independent measurement per ``correlation_px`` pixels along a row (the paper's model). ``clustered``: never
+    smaller than that, and at least the cluster-robust (sandwich) covariance with the band cut into stripes
+    ``correlation_px`` columns wide, each stripe one independent cluster: the residuals of one SAD window's
+    columns are correlated down the column and across it, and those of a wall seen at a slant change slowly
+    along it (pixel locking follows the fractional disparity), which the independent model does not see."""
     correlation_px: float = 15.0
     """Neighbouring disparity pixels are not independent: a window of this size [px] shares its SAD
     support (the block size), so the fitted line's covariance is inflated by ``correlation_px`` (one
@@ -72,6 +84,11 @@ class PlaneConfig:
     trials), because the landmarks the fit feeds are already held less certain than their errors (by the
     boundary's σ, ``noise.boundary_px``), and the office then had three trials with NEES peaks of 225–954. Set it
     when the fitted walls themselves are used, or once the boundary's σ can be measured smaller."""
+
+    def __post_init__(self) -> None:
+        if self.fit_covariance not in FIT_COVARIANCES:
+            raise InputError(expected(f"one of {', '.join(FIT_COVARIANCES)}", self.fit_covariance,
+                                      where="planes.fit_covariance"))
 
     def sigma_nu(self, camera: StereoCamera) -> float:
         return float(self.disparity_noise_px) if self.disparity_noise_px else float(np.sqrt(2.0) * camera.sigma_img)
@@ -401,9 +418,10 @@ def fit_plane(
     # classify every band pixel with the final line.
     frame = (r_s, r_o, c_s, c_o, fb, config.sigma_nu(camera))
     if np.count_nonzero(band[rows.start % 2 :: 2, cols.start % 2 :: 2]) < config.min_pixels // 4:
-        s, o, sigma_o = _wall_points(disp, band, 0, 0, 1, *frame)
+        i0, k0, step = 0, 0, 1
     else:
-        s, o, sigma_o = _wall_points(disp, band, rows.start % 2, cols.start % 2, 2, *frame)
+        i0, k0, step = rows.start % 2, cols.start % 2, 2
+    s, o, sigma_o = _wall_points(disp, band, i0, k0, step, *frame)
     w_all = 1.0 / sigma_o**2
     # Robust start: the median offset, then reweighted least squares with outlier rejection.
     inl = np.ones(len(s), dtype=bool)
@@ -436,6 +454,11 @@ def fit_plane(
     # and made the whole filter more cautious, not more consistent (room's pose NEES 3.1 → 1.5, 20 trials): the
     # landmarks it feeds are already held less certain than their errors, by the boundary's σ. Not adopted.
     cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
+    if config.fit_covariance == "clustered":
+        # the points' box columns, in _wall_points' (row-major) order
+        column = np.nonzero(band[i0::step, k0::step])[1] * step + k0
+        cov_R = _at_least(cov_R, _clustered_cov(N_inv, wgt, o_in - a - b * ds, ds,
+                                                (column[inl] // max(1.0, config.correlation_px)).astype(np.int64)))
     if config.disparity_bias_px > 0:
         # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,
         # o − c_o), Z the pixel's depth; the line (a, b) follows through the weighted least squares
@@ -519,6 +542,33 @@ def _band(disp, v0, d, sigma_d, v_top, v_bottom, gate, row_margin):  # pragma: n
             ok[i, k] = ((abs(x - d[k]) <= gate * sigma_d[k]) & (x > 0)
                         & (v >= v_top[k] - row_margin) & (v <= v_bottom[k] + row_margin))
     return ok
+
+
+def _clustered_cov(N_inv, w, r, ds, cluster) -> np.ndarray:
+    """Cluster-robust (sandwich) covariance of the weighted line fit ``(a, b)``: ``N⁻¹ M N⁻¹ G/(G−1)`` with
+    ``M = Σ_g g_g g_gᵀ``, ``g_g = Σ_{i∈g} w_i r_i (1, ds_i)`` the score of cluster ``g`` (Liang & Zeger); zero
+    with fewer than two clusters."""
+    ids, inv = np.unique(cluster, return_inverse=True)
+    G = len(ids)
+    if G < 2:
+        return np.zeros((2, 2))
+    wr = w * r
+    S = np.stack([np.bincount(inv, weights=wr, minlength=G), np.bincount(inv, weights=wr * ds, minlength=G)], axis=1)
+    M = S.T @ S
+    return N_inv @ M @ N_inv * (G / (G - 1.0))
+
+
+def _at_least(cov: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """``cov`` widened along the principal axes of ``other`` (whitened by ``cov``) where ``other`` is larger:
+    at least ``cov`` and at least ``other`` in every direction."""
+    L = np.linalg.cholesky(cov)
+    Li = np.linalg.inv(L)
+    w, V = np.linalg.eigh(Li @ other @ Li.T)
+    if w.max() <= 1.0:
+        return cov  # nowhere larger: ``cov`` itself, bit for bit
+    S = (V * np.maximum(w, 1.0)) @ V.T
+    out = L @ S @ L.T
+    return 0.5 * (out + out.T)
 
 
 @njit(cache=True)

@@ -52,7 +52,8 @@ def main() -> None:
                 print(f"{name:12s} {kind:12s}     0")
                 continue
             mean, med = v.mean(axis=0), np.median(v, axis=0)
-            print(f"{name:12s} {kind:12s} {len(v):5d}  {mean[0]:11.2f}  {mean[1]:11.2f}  {med[0]:13.2f}  {med[1]:13.2f}")
+            print(f"{name:12s} {kind:12s} {len(v):5d}  {mean[0]:11.2f}  {mean[1]:11.2f}  "
+                  f"{med[0]:13.2f}  {med[1]:13.2f}")
 
 
 if __name__ == "__main__":

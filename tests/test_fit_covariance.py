@@ -70,7 +70,8 @@ def test_clustered_covariance_covers_errors_shared_by_window_stripes(wall):
     err, var_cl, var_ind = [], [], []
     rng = np.random.default_rng(5)
     for _ in range(60):
-        disp = clean + _stripe_noise(clean.shape, start, 15, 0.15, rng) + rng.normal(0, 0.02, clean.shape).astype(np.float32)
+        disp = clean + _stripe_noise(clean.shape, start, 15, 0.15, rng)
+        disp = disp + rng.normal(0, 0.02, clean.shape).astype(np.float32)
         cl, ind = fit_plane(CAM, X0, disp, pred, CLUSTERED), fit_plane(CAM, X0, disp, pred, INDEPENDENT)
         assert cl and ind
         assert (cl.a, cl.b) == (ind.a, ind.b)  # the line itself is the same

@@ -216,7 +216,7 @@ def former_landmarks_on_plane(
                 out = [b for b, zi in zip(boundaries, z, strict=True) if zi > config.boundary_gate_sigma]
                 if not out:  # both fit the pose: it cannot tell which is wrong
                     out = list(boundaries)
-                    why += ": the pose cannot tell which end is wrong, neither is used"
+                    why += ": the pose cannot tell which end is wrong, so both are not used"
                 else:
                     why += f": the one at {out[0].edge} is off the map's edge, not used"
                 for b in out:

@@ -506,7 +506,8 @@ def test_fit_plane_equals_the_reference(scenario_frames, scenario_models):
         for pred in model.predictions:
             disp = np.array(front.disparity.left)
             for d in disparity_variants(disp, rng):
-                for pc in (config.planes, P.PlaneConfig(outlier_sigma=2.0, disparity_bias_px=0.03, fit_covariance="independent")):
+                other = P.PlaneConfig(outlier_sigma=2.0, disparity_bias_px=0.03, fit_covariance="independent")
+                for pc in (config.planes, other):
                     new = P.fit_plane(camera, model.X, d, pred, pc)
                     ref = fit_plane_reference(camera, model.X, d, pred, pc)
                     assert type(new) is type(ref)

@@ -110,12 +110,13 @@ class NoiseConfig:
     slant.
     0.25 px, with ``ekf.edge_updates``, takes the ATE down 1.7–3 times on lab, room and corridor but is not
     the default yet (see ``ekf.edge_updates``).
-    Before those cross-checks and the clustered fit covariance, 0.5 px was tried (8 trials): frames with the pose NEES inside its 95 %
-    bounds 0.10 → 0.76 on lab, 0.96 → 0.92 room, 0.44 → 0.48 corridor, 0.80 → 0.60 office, 0.64 → 0.97 hall, loop's
-    NEES 0.79 (the defaults not rerun there); but selection precision fell on hall (0.99 → 0.93) and on the
-    storeroom (0.75 → 0.69), whose landmark NEES rose 2.3 → 9.3 (on the hall, a line a few px inside a screen's edge
-    was no longer kept away from the boundary by its σ; the storeroom's losses were traced since to a wrong end
-    kept by the map and a free edge 0.58 m off let through, which the cross-checks now refuse): not adopted then. With
+    Before those cross-checks and the clustered fit covariance, 0.5 px was tried (8 trials): frames with the pose
+    NEES inside its 95 % bounds 0.10 → 0.76 on lab, 0.96 → 0.92 room, 0.44 → 0.48 corridor, 0.80 → 0.60 office,
+    0.64 → 0.97 hall, loop's NEES 0.79 (the defaults not rerun there); but selection precision fell on hall
+    (0.99 → 0.93) and on the storeroom (0.75 → 0.69), whose landmark NEES rose 2.3 → 9.3 (on the hall, a line a few
+    px inside a screen's edge was no longer kept away from the boundary by its σ; the storeroom's losses were
+    traced since to a wrong end kept by the map and a free edge 0.58 m off let through, which the cross-checks now
+    refuse): not adopted then. With
     the line noise, this σ and the wall's shared disparity error at their measured values (``sigma_img`` 0.08,
     ``boundary_px`` 0.1, ``planes.disparity_bias_px`` 0.04) the ATE fell to 0.5–0.9 of the defaults' on the five
     built-in scenarios, but lab and room were too cautious (pose NEES 0.8–1.3). With these and with the defaults

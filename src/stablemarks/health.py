@@ -173,8 +173,8 @@ class HealthMonitor:
         ``edges_found``: whether the frame found its walls where the map puts them, which is what clears
         ``edges_not_found`` (default: not ``edges_missing``; a frame can be neither, e.g. one wall turned).
         ``drift``: ``(turn [deg], z)`` when the images turned the heading from the odometry's beyond
-        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on); a third item ``"recoveries"`` or ``"unconfirmed"``
-        says it holds for too many recoveries instead.
+        ``drift_sigma`` in this frame (``heading_drift`` then holds from now on); a third item ``"recoveries"`` says
+        it holds for too many recoveries instead, ``"unconfirmed"`` for a recovery the free edges did not confirm.
         ``reinitialised``: the pose was re-initialised from the landmarks in this frame rather than its covariance
         widened (the sentence of ``odometry_disagrees`` says so)."""
         c = self.config

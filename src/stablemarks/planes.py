@@ -28,7 +28,6 @@ from .errors import InputError, expected
 from .geometry import StereoCamera
 from .maps import Map, ReferencePlane, visible_parts
 
-
 FIT_COVARIANCES = ("clustered", "independent")
 """How :func:`fit_plane` estimates the fitted line's covariance (``PlaneConfig.fit_covariance``)."""
 

@@ -407,3 +407,82 @@ def test_a_scattered_wall_is_named_in_the_frames_warnings(monkeypatch):
     out = select_landmarks(res.front, sc.camera, sc.map, res.X, res.cov_X, config)
     assert not out.selected
     assert any(w.startswith("plane 'board': its") and "2.0 times farther" in w for w in out.warnings), out.warnings
+
+
+@pytest.fixture(scope="module")
+def lab_frame():
+    """The bench's lab pair through the front end and the landmark stage, at its true pose with a 1 cm / 0.3° prior."""
+    from stablemarks.bench import lab_pair
+    from stablemarks.pipeline import plane_regions, run_front_end, select_landmarks
+
+    frame, sc, run, camera = lab_pair()
+    config = Config()
+    X = run.poses[0].as_array()
+    cov = np.diag([0.01, 0.01, np.radians(0.3)]) ** 2
+    front = run_front_end(frame.left, frame.right, config, plane_regions(camera, X, cov, sc.map, config,
+                                                                         frame.left.shape))
+    return camera, sc.map, X, cov, config, front, select_landmarks(front, camera, sc.map, X, cov, config)
+
+
+def test_nearer_than_the_fitted_wall_scores_a_surface_a_few_tenths_of_a_pixel_nearer(lab_frame):
+    """:func:`~stablemarks.landmarks.nearer_than_fit` on the lab's selected lines: under 3 σ on the walls as rendered;
+    beside the partition's first line (200 rows), with the disparity raised by 1.5 px over a window's width (below
+    what the band's test needs with this prior), above ``nearer_fit_sigma``, and growing with the step; lowered
+    instead (farther), not "nearer"."""
+    from stablemarks.landmarks import nearer_than_fit
+
+    camera, _, _, _, config, front, model = lab_frame
+    disp = front.disparity.left
+    window = float(config.sad.block_size)
+    sigma_nu = config.planes.sigma_nu(camera)
+    for m in model.planes:
+        chosen = [c for c in m.candidates if c.selected]
+        args = ([c.u_left for c in chosen], [c.v_top for c in chosen], [c.v_bottom for c in chosen],
+                [0.0] * len(chosen))
+        clean = nearer_than_fit(camera, m.fit, disp, *args, window, sigma_nu)
+        assert len(clean) and np.all(clean < 3.0), (m.fit.plane.id, clean)
+    m = next(p for p in model.planes if p.fit.plane.id == "partition")
+    c = next(c for c in m.candidates if c.selected)
+    assert c.v_bottom - c.v_top > 150
+    u0 = int(np.rint(c.u_left)) + int(window // 2) + 1
+
+    def score(step):
+        moved = disp.copy()
+        moved[int(c.v_top):int(c.v_bottom) + 1, u0:u0 + int(window) + 2] += step
+        return nearer_than_fit(camera, m.fit, moved, [c.u_left], [c.v_top], [c.v_bottom], [0.0], window, sigma_nu)[0]
+
+    assert score(0.0) < 1.0 < score(0.3) < score(0.6) < config.landmarks.nearer_fit_sigma < score(1.5) < score(3.0)
+    assert score(-1.5) < 1.0
+
+
+def test_a_line_beside_a_surface_nearer_than_the_fitted_wall_is_not_selected(lab_frame):
+    """A disparity raised by 1.5 px beside the partition's longest selected line, through
+    :func:`~stablemarks.landmarks.landmarks_on_plane`: that line is rejected as
+    "beside something nearer" (the band's test, which needs 3 σ of the prior and 1 px, lets it through), the others
+    stay selected; with ``nearer_fit_sigma: null`` it is selected as before."""
+    from dataclasses import replace
+
+    from stablemarks.landmarks import REASON_BESIDE_NEARER, landmarks_on_plane
+    from stablemarks.pipeline import valid_columns
+
+    camera, world_map, X, cov, config, front, model = lab_frame
+    m = next(p for p in model.planes if p.fit.plane.id == "partition")
+    chosen = [c for c in m.candidates if c.selected]
+    c = max(chosen, key=lambda k: k.v_bottom - k.v_top)  # the longest: its median is the best resolved
+    window = int(config.sad.block_size)
+    raised = front.disparity.left.copy()
+    u0 = int(np.rint(c.u_left)) + window // 2 + 1
+    raised[int(c.v_top):int(c.v_bottom) + 1, u0:u0 + window + 2] += 1.5
+
+    def selected(landmarks):
+        out = landmarks_on_plane(camera, m.fit, front.kept_pairs, front.left_segments, front.disparity.right,
+                                 landmarks, config.planes, float(window), valid_columns(front.disparity),
+                                 world_map=world_map, cov_X=cov, disparity_left=raised,
+                                 border_sigma_px=(config.noise.boundary_px, config.noise.free_boundary_px))
+        return {round(k.u_left, 3): (k.selected, k.reason) for k in out.candidates}
+
+    on = selected(config.landmarks)
+    off = selected(replace(config.landmarks, nearer_fit_sigma=None))
+    key = round(c.u_left, 3)
+    assert on[key] == (False, REASON_BESIDE_NEARER) and off[key][0], (on[key], off[key])
+    assert {k for k, v in on.items() if v[0]} == {k for k, v in off.items() if v[0]} - {key}

@@ -125,8 +125,9 @@ def prediction_regions(predictions: list[PlanePrediction], shape: tuple[int, int
         rows, cols = pred.box(H, rm)
         if rows.stop > rows.start:
             left.append((rows.start, rows.stop, cols.start, cols.stop))
-        r0 = max(0, math.floor(pred.v_top.min() - rm))
-        r1 = min(H - 1, math.ceil(pred.v_bottom.max() + rm))
+        top, bottom = pred.rows_reached
+        r0 = max(0, math.floor(top - rm))
+        r1 = min(H - 1, math.ceil(bottom + rm))
         for windows in edge_windows([pred], config):
             if not all(lo + 1 < w[0] and w[1] < hi - 1 for w, (lo, hi) in zip(windows, lim, strict=True)):
                 continue
@@ -239,6 +240,40 @@ def _runs_mask(ptr, runs, H, W):  # pragma: no cover - numba
     return mask, (r0, r1, c0, c1)
 
 
+@njit(cache=True)
+def _valid_columns_valid(valid, r0, r1, c0, c1):  # pragma: no cover - numba
+    """First and last column of ``valid[r0:r1, c0:c1]`` (bool) holding a True pixel, in image columns (``first >
+    last``: none). Row by row, each row read from either side only up to the columns found so far: what
+    ``np.flatnonzero(sub.any(axis=0))``'s ends are, reading a fraction of the box."""
+    first, last = c1, c0 - 1
+    for r in range(r0, r1):
+        for c in range(c0, first):
+            if valid[r, c]:
+                first = c
+                break
+        for c in range(c1 - 1, max(first - 1, last), -1):
+            if valid[r, c]:
+                last = c
+                break
+    return first, last
+
+
+@njit(cache=True)
+def _valid_columns_finite(image, r0, r1, c0, c1):  # pragma: no cover - numba
+    """:func:`_valid_columns_valid` of the finite pixels of ``image`` (a disparity image, NaN where none)."""
+    first, last = c1, c0 - 1
+    for r in range(r0, r1):
+        for c in range(c0, first):
+            if np.isfinite(image[r, c]):
+                first = c
+                break
+        for c in range(c1 - 1, max(first - 1, last), -1):
+            if np.isfinite(image[r, c]):
+                last = c
+                break
+    return first, last
+
+
 def _mask_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
     """Bounding box ``(row0, row1, col0, col1)`` (half-open) of the True pixels of an (H, W) bool mask; None: none."""
     rows = np.flatnonzero(np.asarray(mask).any(axis=1))
@@ -281,13 +316,26 @@ def _plans_work(plans, sad: SADConfig, shape: tuple[int, int]) -> float:
     dense_row = W - 2 * r
     if H <= 2 * r or dense_row <= 0:
         return 0.0
-    total = np.zeros(H)
-    for ptr, runs in plans:
-        if len(runs):
-            width = (runs[:, 1] - runs[:, 0] + sad.num_disparities - 1).astype(float)
-            total += np.add.reduceat(np.append(width, 0.0), ptr[:-1]) * (np.diff(ptr) > 0)
-    total = np.where(4 * total >= 3 * dense_row, dense_row, total)[r : H - r]
-    return float(np.minimum(total, dense_row).sum() / (dense_row * (H - 2 * r)))
+    (ptr_l, runs_l), (ptr_r, runs_r) = plans
+    return float(_rows_work(ptr_l, runs_l, ptr_r, runs_r, sad.num_disparities, r, H, dense_row))
+
+
+@njit(cache=True)
+def _rows_work(ptr_l, runs_l, ptr_r, runs_r, n_disp, r, H, dense_row):  # pragma: no cover - numba
+    """:func:`_plans_work` of rows ``r … H − r − 1``: per row the columns of its runs, each widened by ``n_disp − 1``
+    (left and right), the dense row's from three quarters of it on and never more, summed over the rows, over the
+    dense images'. Whole numbers all along (exact in float64, whatever the order they are added in): the same value
+    as the array expressions it replaced."""
+    total = 0
+    for y in range(r, H - r):
+        row = 0
+        for ptr, runs in ((ptr_l, runs_l), (ptr_r, runs_r)):
+            for q in range(ptr[y], ptr[y + 1]):
+                row += runs[q, 1] - runs[q, 0] + n_disp - 1
+        if 4 * row >= 3 * dense_row:
+            row = dense_row
+        total += min(row, dense_row)
+    return total / (dense_row * (H - 2 * r))
 
 
 _SAMPLE_BLOCKS, _SAMPLE_ROWS = 4, 8
@@ -386,9 +434,11 @@ class RegionDisparity:
                 self._found[image] = (np.inf, -np.inf)
             else:  # inside the box of the computed pixels: outside it every pixel is NaN / not valid
                 r0, r1, c0, c1 = box
-                sub = self._valid[r0:r1, c0:c1] if image == 0 else np.isfinite(self._images[1][r0:r1, c0:c1])
-                cols = np.flatnonzero(sub.any(axis=0))
-                self._found[image] = (float(cols[0] + c0), float(cols[-1] + c0)) if len(cols) else (np.inf, -np.inf)
+                if image == 0:
+                    first, last = _valid_columns_valid(self._valid, r0, r1, c0, c1)
+                else:
+                    first, last = _valid_columns_finite(self._images[1], r0, r1, c0, c1)
+                self._found[image] = (float(first), float(last)) if first <= last else (np.inf, -np.inf)
         return self._found[image]
 
     # ------------------------------------------------------------- the columns valid_columns returns

@@ -175,9 +175,16 @@ class PlanePrediction:
         """The bounding box ``(rows, cols)`` of :meth:`band` in images ``height`` rows high: the window's columns,
         the rows the wall's top and bottom reach (``row_margin`` beyond); empty rows when none is inside."""
         u0, u1 = self.window
-        v0 = max(0, int(np.ceil(self.v_top.min() - row_margin)))
-        v1 = max(v0 - 1, min(height - 1, int(np.floor(self.v_bottom.max() + row_margin))))
+        top, bottom = self.rows_reached
+        v0 = max(0, int(np.ceil(top - row_margin)))
+        v1 = max(v0 - 1, min(height - 1, int(np.floor(bottom + row_margin))))
         return slice(v0, v1 + 1), slice(u0, u1 + 1)
+
+    @cached_property
+    def rows_reached(self) -> tuple[float, float]:
+        """The highest row of the wall's top and the lowest of its bottom over the window: ``(v_top.min(),
+        v_bottom.max())`` (made once per prediction: :meth:`box` is asked for by the fit and the regions)."""
+        return float(self.v_top.min()), float(self.v_bottom.max())
 
 
 def column_depth_on_wall(camera: StereoCamera, X, plane: ReferencePlane, u, *, jacobian: bool = False):
@@ -234,18 +241,24 @@ def predict_plane(
     # Eq 5, known wall ends: StereoCamera.cov_columns from the one projection that gives the columns too
     uv, J_X, _ = camera.project_columns(X, ends, jacobians=True)
     cov_I = J_X @ cov_X @ np.swapaxes(J_X, -1, -2)
-    sig = np.sqrt(np.stack([cov_I[:, 0, 0], cov_I[:, 1, 1]], axis=-1) + camera.sigma_img**2)
+    # the ends' σ of (u_l, u_r), on Python floats (the same correctly rounded square roots as np.sqrt's)
+    var_img = camera.sigma_img**2
+    (c_1, _), (_, c_2) = cov_I[0].tolist()
+    (e_1, _), (_, e_2) = cov_I[1].tolist()
+    sig = np.array([[math.sqrt(c_1 + var_img), math.sqrt(c_2 + var_img)],
+                    [math.sqrt(e_1 + var_img), math.sqrt(e_2 + var_img)]])
     edges = {
         w: EdgePrediction(w, ends[i], uv[i], sig[i], w in plane.free_edges) for i, w in enumerate(("p1", "p2"))
     }
     # Column interval of the plane: the visible part of the wall, widened by the ends' 3σ (Eq 6).
     _, Zc = camera.to_camera(X, ends)
-    if np.all(~(Zc > 1e-3)):
+    if not any(z > 1e-3 for z in Zc.tolist()):
         return None
     W = camera.width
-    if np.all(np.isfinite(uv[:, 0])):
-        lo = _nan_extreme(min, (uv[:, 0] - gate * sig[:, 0]).tolist())
-        hi = _nan_extreme(max, (uv[:, 0] + gate * sig[:, 0]).tolist())
+    u_ends, s_ends = uv[:, 0].tolist(), sig[:, 0].tolist()
+    if all(math.isfinite(v) for v in u_ends):
+        lo = _nan_extreme(min, [v - gate * s for v, s in zip(u_ends, s_ends, strict=True)])
+        hi = _nan_extreme(max, [v + gate * s for v, s in zip(u_ends, s_ends, strict=True)])
     else:  # one end behind the camera: the wall runs out of the image on that side
         inside = np.isfinite(uv[:, 0])
         u_in = uv[inside, 0][0]
@@ -261,18 +274,88 @@ def predict_plane(
     u1 = int(min(max(float(np.floor(hi)), 0.0), W - 1))
     if hi < 0 or lo > W - 1 or u1 < u0:
         return None
-    columns = np.arange(u0, u1 + 1)
-    Z, J_Z_X = column_depth_on_wall(camera, X, plane, columns, jacobian=True)
-    ok = np.isfinite(Z) & (Z <= config.max_range)
-    if not ok.any():
+    found = _columns_on_wall(camera, X, plane, u0, u1, config.max_range)
+    if found is None:
         return None
-    columns, Z, J_Z_X = columns[ok], Z[ok], J_Z_X[ok]
-    d, J_d_X = camera.disparity_at_depth(Z, J_Z_X)  # Eqs 8-9 at fixed columns
+    columns, d, J_d_X, v_top, v_bottom = found
     var_d = camera.disparity_variance(J_d_X, cov_X, config.sigma_nu(camera))  # Eq 10
-    z_low, z_high = plane.z
-    v_top = camera.cv + camera.f * (camera.mount_height - z_high) / Z
-    v_bottom = camera.cv + camera.f * (camera.mount_height - z_low) / Z
     return PlanePrediction(plane, columns, d, np.sqrt(var_d), v_top, v_bottom, edges, gate)
+
+
+def _columns_on_wall(camera: StereoCamera, X: np.ndarray, plane: ReferencePlane, u0: int, u1: int, max_range: float):
+    """:func:`predict_plane`'s columns ``u0 … u1``: :func:`column_depth_on_wall` with its Jacobian, the columns where
+    the wall is in front within ``max_range``, and there the disparity with its Jacobian (Eqs 8–9,
+    :meth:`~stablemarks.geometry.StereoCamera.disparity_at_depth`) and the rows of the wall's top and bottom:
+    ``(columns, d, J_d_X, v_top, v_bottom)``, None when no column is. The same operations as those array
+    expressions (the element-wise ones in two numba passes, :func:`_column_rays` and :func:`_wall_depths`; the
+    matrix products, which NumPy hands to BLAS, still NumPy's), without their two dozen temporaries."""
+    cam = camera.camera_pose(X)
+    psi = cam.theta
+    cos_p, sin_p = float(np.cos(psi)), float(np.sin(psi))
+    r, dr_dth = _column_rays(u0, u1, float(camera.cu), float(camera.f), cos_p, sin_p)
+    n = plane.normal
+    c0 = float(n @ plane.P1)
+    nr = r @ n
+    num = float(c0 - n @ cam.translation)
+    th = X[2]
+    m = np.array([camera.mount_x, camera.mount_y])
+    dc_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m
+    z_low, z_high = plane.z
+    out = _wall_depths(u0, nr, dr_dth @ n, num, float(n[0]), float(n[1]), float(n @ dc_dth), float(max_range),
+                       float(camera.f * camera.baseline), float(camera.f * (camera.mount_height - z_high)),
+                       float(camera.f * (camera.mount_height - z_low)), float(camera.cv))
+    return None if len(out[0]) == 0 else out
+
+
+@njit(cache=True)
+def _column_rays(u0, u1, cu, f, cos_p, sin_p):  # pragma: no cover - numba
+    """:func:`column_depth_on_wall`'s rays of columns ``u0 … u1``: ``r`` (K, 2), the world direction of unit depth
+    ``fwd + (u − cu)/f · right``, and its derivative in the heading ``dr_dth`` (K, 2)."""
+    K = u1 - u0 + 1
+    r = np.empty((K, 2))
+    dr = np.empty((K, 2))
+    for k in range(K):
+        xn = (float(u0 + k) - cu) / f
+        r[k, 0] = cos_p + xn * sin_p
+        r[k, 1] = sin_p + xn * -cos_p
+        dr[k, 0] = -sin_p + xn * cos_p
+        dr[k, 1] = cos_p + xn * sin_p
+    return r, dr
+
+
+@njit(cache=True, error_model="numpy")
+def _wall_depths(u0, nr, drn, num, n0, n1, ndc, max_range, fb, f_top, f_bottom, cv):  # pragma: no cover - numba
+    """:func:`column_depth_on_wall`'s depth ``Z = num / (r·n)`` and Jacobian, of the columns ``u0 + k`` with a finite
+    depth above 1 mm and at most ``max_range``, then the disparity ``fb / Z``, its Jacobian ``−fb / Z² · J_Z`` and
+    the rows ``cv + f_top / Z``, ``cv + f_bottom / Z`` there: ``(columns, d, J_d_X (K, 3), v_top, v_bottom)``."""
+    K = nr.shape[0]
+    Z = np.empty(K)
+    m = 0
+    for k in range(K):
+        z = num / nr[k]
+        z = z if z > 1e-3 else np.nan
+        Z[k] = z
+        m += np.isfinite(z) & (z <= max_range)
+    columns = np.empty(m, dtype=np.int64)
+    d = np.empty(m)
+    J = np.empty((m, 3))
+    v_top = np.empty(m)
+    v_bottom = np.empty(m)
+    j = 0
+    for k in range(K):
+        z = Z[k]
+        if np.isfinite(z) & (z <= max_range):
+            q = nr[k]
+            g = -fb / (z * z)
+            columns[j] = u0 + k
+            d[j] = fb / z
+            J[j, 0] = g * (-n0 / q)
+            J[j, 1] = g * (-n1 / q)
+            J[j, 2] = g * (((-ndc) * q - num * drn[k]) / (q * q))
+            v_top[j] = cv + f_top / z
+            v_bottom[j] = cv + f_bottom / z
+            j += 1
+    return columns, d, J, v_top, v_bottom
 
 
 def _nan_extreme(pick, values: list[float]) -> float:
@@ -393,15 +476,16 @@ def fit_plane(
     dropped and the fit repeated (clutter in front of the wall does not bend it).
     """
     plane = prediction.plane
-    # the band's box as one contiguous array (the per-pixel loops vectorize on it): band_box's band of it
+    # the band's box as one contiguous array (the per-pixel loops vectorize on it): band_box's band of it, with the
+    # counts the checks below need (its pixels, its columns, its pixels on every other row and column) in one pass
     rows, cols = prediction.box(disparity.shape[0], config.row_margin_px)
     disp = np.ascontiguousarray(disparity[rows, cols])
-    band = _band(disp, rows.start, prediction.d, prediction.sigma_d, prediction.v_top, prediction.v_bottom,
-                 float(prediction.gate), float(config.row_margin_px))
-    n = int(np.count_nonzero(band))
+    band, n, n_columns, n_half = _band_counts(disp, rows.start, prediction.d, prediction.sigma_d, prediction.v_top,
+                                              prediction.v_bottom, float(prediction.gate), float(config.row_margin_px),
+                                              rows.start % 2, cols.start % 2)
     if n < config.min_pixels:
         return FailedFit(plane, f"{n} disparity pixels in the predicted band (need {config.min_pixels})", n)
-    if np.count_nonzero(band.any(axis=0)) < config.min_columns:
+    if n_columns < config.min_columns:
         return FailedFit(plane, "band pixels span too few columns", n)
     # Every pixel of the band's box in the wall frame, placed with the mean pose: the left pixel at column
     # u with depth Z is at c + Z r(u), r(u) = fwd + (u − cu)/f · right the world direction of unit depth.
@@ -416,35 +500,38 @@ def fit_plane(
     # Fit on every other row and column (neighbouring pixels share their SAD window anyway), then
     # classify every band pixel with the final line.
     frame = (r_s, r_o, c_s, c_o, fb, config.sigma_nu(camera))
-    if np.count_nonzero(band[rows.start % 2 :: 2, cols.start % 2 :: 2]) < config.min_pixels // 4:
+    if n_half < config.min_pixels // 4:
         i0, k0, step = 0, 0, 1
     else:
         i0, k0, step = rows.start % 2, cols.start % 2, 2
-    s, o, sigma_o = _wall_points(disp, band, i0, k0, step, *frame)
-    w_all = 1.0 / sigma_o**2
+    # the points, their weights 1/σ_o² and their box columns (the clusters of the clustered covariance)
+    s, o, sigma_o, w_all, column = _wall_points_weights(disp, band, i0, k0, step, *frame)
     # Robust start: the median offset, then reweighted least squares with outlier rejection.
     inl = np.ones(len(s), dtype=bool)
     a, b = median(o), 0.0
     s0 = median(s)
     scale = 1.0
     min_inliers = max(3, len(s) * config.min_pixels // (2 * n))
+    outlier_sigma = float(config.outlier_sigma)
     for _ in range(4):
         # the data's own spread, not the model's σ: disparity noise is often below σ_ν, and clutter
-        # a few tens of cm in front of a wall is then still separable (the scale, the new inliers and their
-        # weights and points in one pass: _reweight)
-        scale, inl, wgt, s_in, o_in = _reweight(s, o, sigma_o, w_all, inl, float(a), float(b), float(s0),
-                                                float(config.outlier_sigma))
+        # a few tens of cm in front of a wall is then still separable (the scale, the new inliers, their
+        # weights and points and the weights' sum in three calls: _reweight_sum)
+        scale, inl, wgt, s_in, o_in, sum_w = _reweight_sum(s, o, sigma_o, w_all, inl, float(a), float(b), float(s0),
+                                                           outlier_sigma)
         if len(wgt) < min_inliers:
             return FailedFit(plane, "too few pixels agree on one wall line", n)
-        sum_w = float(wgt.sum())
         s0 = float(wgt @ s_in) / sum_w
-        ds = s_in - s0
-        w_ds = wgt * ds
-        N_inv = _inverse_spd2(sum_w, w_ds.sum(), w_ds @ ds)  # N = [[Σw, Σw·ds], [Σw·ds, Σw·ds²]]
+        ds, w_ds, sum_w_ds = _centred(wgt, s_in, s0)
+        N_inv = _inverse_spd2(sum_w, sum_w_ds, w_ds @ ds)  # N = [[Σw, Σw·ds], [Σw·ds, Σw·ds²]]
         if N_inv is None:
             return FailedFit(plane, "wall seen over too short a span to fit", n)
         a, b = (float(v) for v in N_inv @ np.array([wgt @ o_in, w_ds @ o_in]))
-    res = _residuals(s, o, sigma_o, inl, a, b, s0)[0][inl]  # the final line's, of the final inliers
+    # the final line's normalised residuals of the final inliers and, for the clustered covariance, each stripe's
+    # score (see _clustered_cov)
+    clustered = config.fit_covariance == "clustered"
+    res, scores = _final_residuals(s, o, sigma_o, w_all, inl, a, b, s0, column,
+                                   float(max(1.0, config.correlation_px)), clustered)
     chi2_dof = float(res @ res) / max(1, len(res) - 2)
     # one independent measurement per `correlation_px` pixels of the full band (the subsample carries
     # len(s)/n of its information). The residuals are correlated down the column as well (13–14 px either way
@@ -453,11 +540,8 @@ def fit_plane(
     # and made the whole filter more cautious, not more consistent (room's pose NEES 3.1 → 1.5, 20 trials): the
     # landmarks it feeds are already held less certain than their errors, by the boundary's σ. Not adopted.
     cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
-    if config.fit_covariance == "clustered":
-        # the points' box columns, in _wall_points' (row-major) order
-        column = np.nonzero(band[i0::step, k0::step])[1] * step + k0
-        cov_R = _at_least(cov_R, _clustered_cov(N_inv, wgt, o_in - a - b * ds, ds,
-                                                (column[inl] // max(1.0, config.correlation_px)).astype(np.int64)))
+    if clustered:
+        cov_R = _at_least(cov_R, _sandwich(N_inv, scores))
     if config.disparity_bias_px > 0:
         # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,
         # o − c_o), Z the pixel's depth; the line (a, b) follows through the weighted least squares
@@ -465,11 +549,10 @@ def fit_plane(
         g = -(depth / fb) * ((o_in - c_o) - b * (s_in - c_s))
         J_beta = N_inv @ np.array([wgt @ g, w_ds @ g])
         cov_R = cov_R + config.disparity_bias_px**2 * np.outer(J_beta, J_beta)
-    keep = _on_line(disp, band, *frame, a, b, s0, config.outlier_sigma * scale)
-    region = np.zeros(disparity.shape, dtype=bool)
-    region[rows, cols] = keep
-    return PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, int(np.count_nonzero(keep)),
-                    chi2_dof, X, (rows, cols))
+    # every band pixel within the final limit, written into the image-sized region
+    region = np.zeros(np.shape(disparity), dtype=bool)
+    n_keep = _on_line_region(region, rows.start, cols.start, disp, band, *frame, a, b, s0, config.outlier_sigma * scale)
+    return PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, n_keep, chi2_dof, X, (rows, cols))
 
 
 @njit(cache=True)
@@ -525,6 +608,172 @@ def _reweight(s, o, sigma_o, w_all, inl, a: float, b: float, s0: float, outlier_
     return (scale, *_inliers(res, outlier_sigma * scale, w_all, s, o))
 
 
+def _reweight_sum(s, o, sigma_o, w_all, inl, a: float, b: float, s0: float, outlier_sigma: float):
+    """:func:`_reweight` and the sum of the new inliers' weights, NumPy's ``wgt.sum()`` (:func:`_pairwise_sum`):
+    ``(scale, inl, wgt, s_in, o_in, sum_w)``. The median partitions the residuals in place (they are this call's
+    own): the same partition as :func:`median`'s copy."""
+    res, absres = _residuals(s, o, sigma_o, inl, a, b, s0)
+    k = len(absres) // 2
+    absres.partition(k)
+    mid = float(absres[k]) if len(absres) % 2 else float((absres[:k].max() + absres[k]) / 2)
+    scale = max(1e-3, 1.4826 * mid)
+    return (scale, *_inliers_sum(res, outlier_sigma * scale, w_all, s, o))
+
+
+@njit(cache=True)
+def _inliers_sum(res, limit, w_all, s, o):  # pragma: no cover - numba
+    """:func:`_inliers` and the sum of the inliers' weights as NumPy's ``sum`` adds them (:func:`_pairwise_sum`)."""
+    new, wgt, s_in, o_in = _inliers(res, limit, w_all, s, o)
+    return new, wgt, s_in, o_in, _pairwise_sum(wgt, 0, wgt.shape[0])
+
+
+@njit(cache=True)
+def _centred(wgt, s_in, s0):  # pragma: no cover - numba
+    """``ds = s_in − s0``, ``w_ds = wgt · ds`` and ``w_ds.sum()`` (NumPy's summation order, :func:`_pairwise_sum`) in
+    one call: :func:`fit_plane`'s normal equations, the same element-wise operations as the array expressions."""
+    n = s_in.shape[0]
+    ds = np.empty(n)
+    w_ds = np.empty(n)
+    for i in range(n):
+        d = s_in[i] - s0
+        ds[i] = d
+        w_ds[i] = wgt[i] * d
+    return ds, w_ds, _pairwise_sum(w_ds, 0, n)
+
+
+@njit(cache=True)
+def _pairwise_block(a, lo, n):  # pragma: no cover - numba
+    """NumPy's pairwise summation of ``a[lo : lo + n]`` for ``n <= 128``: below 8 elements left to right from 0,
+    else in eight interleaved partial sums combined pairwise, the rest added after."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        q = lo + i
+        r0 += a[q]
+        r1 += a[q + 1]
+        r2 += a[q + 2]
+        r3 += a[q + 3]
+        r4 += a[q + 4]
+        r5 += a[q + 5]
+        r6 += a[q + 6]
+        r7 += a[q + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a, lo, n):  # pragma: no cover - numba
+    """The sum of ``a[lo : lo + n]`` (contiguous float64) as NumPy's ``add.reduce`` sums it, bit for bit: blocks of at
+    most 128 (:func:`_pairwise_block`), a longer stretch split in two halves (the first a multiple of 8) summed apart
+    and added. The recursion unrolled on a stack (a stretch's start, length, and the sum of its first half once
+    known): numba's cache does not load recursive functions safely. (The same as ``landmarks._pairwise_sum``, which
+    this module cannot import.)"""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    starts = np.empty(64, np.int64)
+    lengths = np.empty(64, np.int64)
+    firsts = np.empty(64)
+    halves = np.zeros(64, np.int64)  # 0: neither half summed, 1: the first
+    starts[0], lengths[0], sp = lo, n, 1
+    while True:
+        top = sp - 1
+        m = lengths[top]
+        if m > 128:  # split: its first half first (a stretch on top has neither half summed yet)
+            h = m // 2
+            h -= h % 8
+            starts[sp], lengths[sp], halves[sp] = starts[top], h, 0
+            sp += 1
+            continue
+        val = _pairwise_block(a, starts[top], m)
+        sp -= 1
+        # hand the sum up: the first half of its parent waits for the second, the second completes the parent
+        while sp > 0:
+            parent = sp - 1
+            h = lengths[parent] // 2
+            h -= h % 8
+            if halves[parent] == 0:
+                firsts[parent], halves[parent] = val, 1
+                starts[sp], lengths[sp], halves[sp] = starts[parent] + h, lengths[parent] - h, 0
+                sp += 1
+                break
+            val = firsts[parent] + val
+            sp -= 1
+        if sp == 0:
+            return val
+
+
+@njit(cache=True, error_model="numpy")
+def _final_residuals(s, o, sigma_o, w_all, inl, a, b, s0, column, width, clustered):  # pragma: no cover - numba
+    """After :func:`fit_plane`'s last reweighting: the normalised residuals ``(o − a − b (s − s0)) / σ_o`` of the
+    inliers ``inl`` (m,) and, when ``clustered``, the scores (G, 2) of the stripes ``column // width`` that hold an
+    inlier, in increasing stripe order: ``Σ w r (1, s − s0)`` over the stripe's inliers, ``r = o − a − b (s − s0)``
+    (what :func:`_clustered_cov` sums with ``np.bincount``, element by element in the points' order; empty (0, 2)
+    otherwise). The residuals are :func:`_residuals`' arithmetic, the scores that of the array expressions
+    ``w_in * (o_in − a − b * ds)`` (then times ``ds``) they replaced."""
+    n = s.shape[0]
+    m = 0
+    top_column = 0
+    for i in range(n):
+        m += inl[i]
+        top_column = max(top_column, column[i])
+    # each column's stripe, once per column: the same floor division as on every point
+    stripe = np.empty(top_column + 1 if clustered else 0, dtype=np.int64)
+    for k in range(stripe.shape[0]):
+        stripe[k] = np.int64(float(k) // width)
+    res = np.empty(m)
+    sigma_in = np.empty(m)
+    r_in = np.empty(m)
+    ds_in = np.empty(m)
+    g_in = np.empty(m, dtype=np.int64)
+    j = 0
+    top = -1
+    for i in range(n):
+        if inl[i]:
+            ds = s[i] - s0
+            r = (o[i] - a) - b * ds
+            res[j] = r
+            sigma_in[j] = sigma_o[i]
+            if clustered:
+                r_in[j] = w_all[i] * r
+                ds_in[j] = ds
+                g = stripe[column[i]]
+                g_in[j] = g
+                top = max(top, g)
+            j += 1
+    for j in range(m):  # the divisions in a loop of their own: it vectorizes
+        res[j] = res[j] / sigma_in[j]
+    if not clustered:
+        return res, np.zeros((0, 2))
+    count = np.zeros(top + 1, dtype=np.int64)
+    sums = np.zeros((top + 1, 2))
+    for j in range(m):
+        g = g_in[j]
+        count[g] += 1
+        sums[g, 0] += r_in[j]
+        sums[g, 1] += r_in[j] * ds_in[j]
+    G = 0
+    for g in range(top + 1):
+        G += count[g] > 0
+    scores = np.empty((G, 2))
+    q = 0
+    for g in range(top + 1):
+        if count[g] > 0:
+            scores[q, 0] = sums[g, 0]
+            scores[q, 1] = sums[g, 1]
+            q += 1
+    return res, scores
+
+
 # Per-pixel loops of the band and the fit, over the band's box (see PlanePrediction.band_box). A left pixel
 # at column u with disparity d is at depth Z = f b / d, at distance c_s + Z r_s(u) along the wall and
 # offset c_o + Z r_o(u) from it, with σ of the offset |r_o(u)| Z² σ_ν / (f b) (depth σ on the normal).
@@ -546,13 +795,21 @@ def _band(disp, v0, d, sigma_d, v_top, v_bottom, gate, row_margin):  # pragma: n
 def _clustered_cov(N_inv, w, r, ds, cluster) -> np.ndarray:
     """Cluster-robust (sandwich) covariance of the weighted line fit ``(a, b)``: ``N⁻¹ M N⁻¹ G/(G−1)`` with
     ``M = Σ_g g_g g_gᵀ``, ``g_g = Σ_{i∈g} w_i r_i (1, ds_i)`` the score of cluster ``g`` (Liang & Zeger); zero
-    with fewer than two clusters."""
+    with fewer than two clusters. (:func:`fit_plane` makes the scores in :func:`_final_residuals`.)"""
     ids, inv = np.unique(cluster, return_inverse=True)
     G = len(ids)
     if G < 2:
         return np.zeros((2, 2))
     wr = w * r
     S = np.stack([np.bincount(inv, weights=wr, minlength=G), np.bincount(inv, weights=wr * ds, minlength=G)], axis=1)
+    return _sandwich(N_inv, S)
+
+
+def _sandwich(N_inv, S) -> np.ndarray:
+    """:func:`_clustered_cov` of the clusters' scores ``S`` (G, 2): ``N⁻¹ SᵀS N⁻¹ G/(G−1)``, zero when ``G < 2``."""
+    G = len(S)
+    if G < 2:
+        return np.zeros((2, 2))
     M = S.T @ S
     return N_inv @ M @ N_inv * (G / (G - 1.0))
 
@@ -594,6 +851,67 @@ def _wall_points(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu):  #
     return s, o, sigma
 
 
+@njit(cache=True)
+def _band_counts(disp, v0, d, sigma_d, v_top, v_bottom, gate, row_margin, i_half, k_half):  # pragma: no cover - numba
+    """:func:`_band` of the box ``disp`` (first row ``v0``), with what :func:`fit_plane` checks next in the same pass:
+    the band's pixels, the columns holding any, and its pixels in rows ``i_half, i_half + 2, …`` and columns
+    ``k_half, k_half + 2, …``. The same test per pixel as :func:`_band`."""
+    h, K = disp.shape
+    band = np.empty((h, K), dtype=np.bool_)
+    seen = np.zeros(K, dtype=np.uint8)
+    n = 0
+    n_half = 0
+    for i in range(h):
+        v = v0 + i
+        row = band[i]
+        c = 0
+        for k in range(K):
+            x = float(disp[i, k])
+            # a zero disparity is a point at infinity: never on a wall
+            ok = ((abs(x - d[k]) <= gate * sigma_d[k]) & (x > 0)
+                  & (v >= v_top[k] - row_margin) & (v <= v_bottom[k] + row_margin))
+            row[k] = ok
+            c += ok
+            seen[k] |= ok
+        n += c
+        if c and (i - i_half) % 2 == 0:
+            for k in range(k_half, K, 2):
+                n_half += row[k]
+    n_columns = 0
+    for k in range(K):
+        n_columns += seen[k] != 0
+    return band, n, n_columns, n_half
+
+
+@njit(cache=True, error_model="numpy")
+def _wall_points_weights(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu):  # pragma: no cover - numba
+    """:func:`_wall_points` with each point's weight ``1 / σ_o²`` and box column: ``(s, o, σ_o, w, column)`` (n,),
+    the same arithmetic (and ``w`` that of ``1.0 / σ_o**2``)."""
+    h, K = disp.shape
+    n = 0
+    for i in range(i0, h, step):
+        for k in range(k0, K, step):
+            n += band[i, k]
+    s = np.empty(n)
+    o = np.empty(n)
+    sigma = np.empty(n)
+    w = np.empty(n)
+    column = np.empty(n, dtype=np.int64)
+    n = 0
+    for i in range(i0, h, step):
+        for k in range(k0, K, step):
+            if band[i, k]:
+                Z = fb / float(disp[i, k])
+                s[n] = c_s + Z * r_s[k]
+                o[n] = c_o + Z * r_o[k]
+                sigma[n] = abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6
+                column[n] = k
+                n += 1
+    for j in range(n):  # in a loop of its own: it vectorizes
+        w[j] = 1.0 / (sigma[j] * sigma[j])
+    return s, o, sigma, w, column
+
+
 @njit(cache=True, error_model="numpy")
 def _on_line(disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu, a, b, s0, limit):  # pragma: no cover - numba
     """Band pixels (h, K) within ``limit`` σ of the line ``o = a + b (s − s0)``. Branch-free (every pixel's test
@@ -608,6 +926,50 @@ def _on_line(disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu, a, b, s0, limit):  # 
             keep[i, k] = band[i, k] & (abs((o - a - b * (s - s0)) / (abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6))
                                        <= limit)
     return keep
+
+
+@njit(cache=True, error_model="numpy")
+def _on_line_region(region, v0, c0, disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu, a, b, s0,
+                    limit):  # pragma: no cover - numba
+    """:func:`_on_line` of the box ``disp`` written into ``region`` (the image's, all False; the box's first row
+    ``v0`` and column ``c0``); returns how many pixels are kept. The same answer per pixel.
+
+    :func:`_on_line`'s test ``|r / σ| <= limit`` (``r`` the residual, ``σ = |r_o| (Z² / fb · σ_ν) + 1e-6``) takes
+    three divisions a pixel, which bound its time. Here ``σ`` is first taken with ``1 / fb`` as a factor (a few
+    roundings apart from the exact one, ~1e-15 relative) and ``|r| <= limit · σ`` tested with a margin of 1e-12:
+    a pixel inside ``limit (1 − 1e-12)`` passes the exact test, one beyond ``limit (1 + 1e-12)`` fails it, whatever
+    the roundings; a row with a band pixel between the two (hardly ever one) is tested again exactly as
+    :func:`_on_line` does. One division a pixel, the loop still branch-free (twice as fast). A limit that is not a
+    positive number: the exact test everywhere."""
+    h, K = disp.shape
+    exact = not (limit > 0.0 and limit < np.inf)
+    inv_fb = 1.0 / fb
+    lo_limit = limit * (1.0 - 1e-12)
+    hi_limit = limit * (1.0 + 1e-12)
+    count = 0
+    for i in range(h):
+        row = region[v0 + i, c0 : c0 + K]
+        n_unsure = 0
+        for k in range(K):
+            Z = fb / float(disp[i, k])
+            s = c_s + Z * r_s[k]
+            o = c_o + Z * r_o[k]
+            r = abs(o - a - b * (s - s0))
+            sigma = abs(r_o[k]) * (Z * Z * inv_fb * sigma_nu) + 1e-6
+            inside = r <= lo_limit * sigma
+            row[k] = band[i, k] & inside
+            n_unsure += band[i, k] & ~inside & (r <= hi_limit * sigma)
+        if n_unsure or exact:
+            for k in range(K):
+                Z = fb / float(disp[i, k])
+                s = c_s + Z * r_s[k]
+                o = c_o + Z * r_o[k]
+                row[k] = band[i, k] & (abs((o - a - b * (s - s0)) / (abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6))
+                                       <= limit)
+        kept = row.view(np.uint8)
+        for k in range(K):
+            count += kept[k]
+    return count
 
 
 @njit(cache=True, error_model="numpy")

@@ -1676,7 +1676,8 @@ def nearer_than_fit(camera: StereoCamera, fit: PlaneFit, disparity_left: np.ndar
     wall's at its column (the ray meeting the line ``o = a + b (s − s0)`` seen from ``fit.X``): per row their
     median, per side the median ``m`` of the rows (every fifth of a window's rows). The score is ``m`` over the
     standard error of that median, ``1.2533 σ / sqrt(n_rows / window)`` (a SAD window's rows share their errors),
-    ``σ`` the larger of ``sigma_nu`` and the rows' own spread (1.4826 MAD), combined with the fitted wall's σ of disparity at the line (from ``fit.cov_R``)."""
+    ``σ`` the larger of ``sigma_nu`` and the rows' own spread (1.4826 MAD), combined with the fitted wall's σ of
+    disparity at the line (from ``fit.cov_R``)."""
     u_left = np.asarray(u_left, dtype=np.float64)
     n = len(u_left)
     if n == 0:

@@ -1686,24 +1686,17 @@ def nearer_than_fit(camera: StereoCamera, fit: PlaneFit, disparity_left: np.ndar
         return np.zeros(0)
     plane = fit.plane
     cam = camera.camera_pose(np.asarray(fit.X, dtype=float))
-    fwd = np.array([np.cos(cam.theta), np.sin(cam.theta)])
-    right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
+    cth, sth = math.cos(cam.theta), math.sin(cam.theta)  # forward (cth, sth), right (sth, −cth)
     c_s, c_o = float(plane.along(cam.translation)), float(plane.offset(cam.translation))
-    fb = camera.f * camera.baseline
-    # the fitted wall's disparity at each line's column and its σ from the line's covariance (a, b)
-    r = fwd[None, :] + ((u_left - camera.cu) / camera.f)[:, None] * right[None, :]
-    r_s, r_o = r @ plane.direction, r @ plane.normal
-    den = r_o - fit.b * r_s
-    Z = (fit.a + fit.b * (c_s - fit.s0) - c_o) / den
-    J = np.stack([1.0 / den, (c_s - fit.s0 + Z * r_s) / den], axis=-1) * (-fb / Z**2)[:, None]  # ∂d/∂(a, b)
-    var_fit = np.einsum("ni,ij,nj->n", J, np.asarray(fit.cov_R, dtype=float), J)
+    cov = np.asarray(fit.cov_R, dtype=float)
     z = _nearer_than_fit(
         disparity_left, 0, disparity_left.shape[0], 0, disparity_left.shape[1], u_left,
         np.asarray(v_top, dtype=np.float64), np.asarray(v_bottom, dtype=np.float64),
         np.asarray(slope, dtype=np.float64), int(window_px // 2) + 1, int(window_px) + 2,
-        float(camera.cu), float(camera.f), fwd[0], fwd[1], right[0], right[1], float(plane.direction[0]),
+        float(camera.cu), float(camera.f), cth, sth, sth, -cth, float(plane.direction[0]),
         float(plane.direction[1]), float(plane.normal[0]), float(plane.normal[1]), c_s, c_o, float(fit.a),
-        float(fit.b), float(fit.s0), fb, float(sigma_nu), float(window_px), np.maximum(var_fit, 0.0))
+        float(fit.b), float(fit.s0), float(camera.f * camera.baseline), float(sigma_nu), float(window_px),
+        float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1]))
     return z
 
 
@@ -1722,11 +1715,13 @@ def _small_median(vals, k):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _nearer_than_fit(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o0, o1, cu, f, fx, fy, rx, ry, dx, dy,
-                     nx, ny, c_s, c_o, a, b, s0, fb, sigma_nu, window, var_fit):  # pragma: no cover - numba
-    """:func:`nearer_than_fit`'s scores, one pass over the lines' samples; the fitted wall's disparity computed once
-    per column, when a sample there first holds a disparity. Every ``step``-th row (a fifth of a window: the rows
-    of one window share their errors, so the median loses next to nothing), counted as such in the error."""
+def _nearer_than_fit(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o0, o1, cu, f, fx, fy, rx, ry, dx, dy, nx,
+                     ny, c_s, c_o, a, b, s0, fb, sigma_nu, window, caa, cab, cbb):  # pragma: no cover - numba
+    """:func:`nearer_than_fit`'s scores, one pass over the lines' samples (the fitted wall's σ of disparity at each
+    line's column from its covariance ``[[caa, cab], [cab, cbb]]`` of ``(a, b)``); the fitted wall's disparity
+    computed once per column, when a sample there first holds a disparity. Every ``step``-th row (a fifth of a
+    window: the rows of one window share their errors, so the median loses next to nothing), counted as such in
+    the error."""
     n = len(u_left)
     out = np.full(n, np.nan)
     vals = np.empty(o1 - o0)
@@ -1740,6 +1735,15 @@ def _nearer_than_fit(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o0, o
         n_rows = v1 - v0 + 1
         mid = 0.5 * (v_top[i] + v_bottom[i])
         rows = np.empty(n_rows)
+        # the fitted wall's disparity error at the line's column: ∂d/∂(a, b) through the depth Z there
+        xn = (u_left[i] - cu) / f
+        wx, wy = fx + xn * rx, fy + xn * ry
+        r_s, r_o = wx * dx + wy * dy, wx * nx + wy * ny
+        den = r_o - b * r_s
+        depth = (a + b * (c_s - s0) - c_o) / den
+        ja = -fb / depth**2 / den
+        jb = ja * (c_s - s0 + depth * r_s)
+        var_fit = max(0.0, ja * ja * caa + 2.0 * ja * jb * cab + jb * jb * cbb)
         for side in (-1, 1):
             m_rows = 0
             for v in range(v0, v1 + 1, step):
@@ -1771,7 +1775,7 @@ def _nearer_than_fit(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o0, o
             med = np.median(rows[:m_rows])
             mad = np.median(np.abs(rows[:m_rows] - med))
             spread = max(sigma_nu, 1.4826 * mad)
-            se2 = (1.2533 * spread) ** 2 / max(1.0, m_rows * step / window) + var_fit[i]
+            se2 = (1.2533 * spread) ** 2 / max(1.0, m_rows * step / window) + var_fit
             score = med / np.sqrt(se2)
             if np.isnan(out[i]) or score > out[i]:
                 out[i] = score

@@ -392,13 +392,17 @@ def frames(scenario_frames):
     return out
 
 
-# the former landmark stage had no test against the fitted wall (landmarks.nearer_fit_sigma, added later)
-_FORMER = {"landmarks": {"nearer_fit_sigma": None}}
+def _former(**landmarks) -> Config:
+    """The defaults with ``landmarks`` overrides, without the test against the fitted wall
+    (``landmarks.nearer_fit_sigma``), which the former landmark stage did not have."""
+    return Config().with_overrides({"landmarks": {**landmarks, "nearer_fit_sigma": None}})
+
+
 CONFIGS = {
-    "default": Config().with_overrides(_FORMER),
-    "no nearer test": Config().with_overrides({"landmarks": {"nearer_fraction": 1.0, "nearer_fit_sigma": None}}),
-    "measured": Config().with_overrides({"landmarks": {"filter_boundary_sigma": "measured", "nearer_fit_sigma": None}}),
-    "oblique": Config().with_overrides({"landmarks": {"max_incidence_deg": 25.0, "nearer_fit_sigma": None}}),
+    "default": _former(),
+    "no nearer test": _former(nearer_fraction=1.0),
+    "measured": _former(filter_boundary_sigma="measured"),
+    "oblique": _former(max_incidence_deg=25.0),  # edges not searched, with why
 }
 
 
@@ -422,7 +426,7 @@ def test_landmarks_on_plane_memo_same_as_former(frames):
     an edge named that it does not have), without a pose covariance, a map or a left disparity, with edges not searched
     (the disparity range, the incidence; their reasons are kept in the memo): each result the
     former function's with the same arguments, also when the memo was filled by a call with other ``unusable``."""
-    config = Config().with_overrides(_FORMER)
+    config = _former()
     checked = 0
     for name, k, cam, world_map, X, cov, front in frames:
         model = select_landmarks(front, cam, world_map, X, cov, config)

@@ -31,7 +31,7 @@ from numba import njit
 from .errors import InputError, expected
 from .geometry import StereoCamera
 from .maps import Map, nearest_crossing, sight_blocked
-from .planes import PlaneConfig, PlaneFit, fuse_one, median, plane_members
+from .planes import PlaneConfig, PlaneFit, _pairwise_sum, fuse_one, median, plane_members
 
 REASON_NEAR_BOUNDARY = "near boundary"
 REASON_LENGTH = "low length similarity"
@@ -176,14 +176,10 @@ class LandmarkConfig:
     rows), the median disparity is nearer than the fitted wall's by more than this many standard errors
     (:func:`nearer_than_fit`; the error of a median of the rows, one independent row per SAD window, from the
     larger of ``planes.disparity_noise_px`` and the rows' own spread, and the fitted wall's covariance). The band's
-    test needs ``gate`` σ of the pose plus 1 px; this one resolves a few tenths of a pixel when the line is long,
-    a surface some 10 cm in front of a wall at 5 m (the office's cabinet, 5.5 cm off its wall, whose side face
-    stands nearer still). Measured (``python benchmarks/false_landmarks.py``, 2 trials each of lab, room,
-    corridor, office, hall and ``benchmarks/scenarios/storeroom.yaml``): the true wall features' larger side
-    score is 0.1–0.2 at the median and at most 1.1–4.8, except two of the corridor's lines (14.6 and 16.6; lines
-    of a poster board's edge beside the board); the cabinet's edge scored 9.6–11.6. A desk's corner 0.2 m in
-    front of a wall at 6 m seen at 35° scored only 1.5–2.2: its side face is too narrow in the image there, and
-    what the frame cannot resolve stays in (``docs/uncertainty.md``). With ``stablemarks eval`` (5 trials):
+    test needs ``gate`` σ of the pose plus 1 px; this one resolves a few tenths of a pixel when the line is long
+    (``docs/uncertainty.md``, "Something nearer than the fitted wall", for what it scores on the built-in scenes
+    and what it cannot resolve: a desk's corner 0.2 m in front of a wall at 6 m seen at 35°, whose side face is a
+    few pixels wide there, stays in). With ``stablemarks eval`` (5 trials):
     office precision 0.89 → 0.92, storeroom landmark NEES 0.63 → 0.14 and recall 0.48 → 0.52, lab, room and
     corridor unchanged. None turns it off."""
     min_edge_step_sigma: float = 3.0
@@ -413,76 +409,6 @@ def minimum_variance_column(cols: np.ndarray, lo: float, hi: float) -> tuple[flo
         var = ((cols[None, :] - cand[:, None]) ** 2).mean(axis=1)
         m = float(cand[int(np.argmin(var))])
     return m, float(((cols - m) ** 2).mean())
-
-
-@njit(cache=True)
-def _pairwise_block(a, lo, n):  # pragma: no cover - numba
-    """NumPy's pairwise summation of ``a[lo : lo + n]`` for ``n <= 128``: below 8 elements left to right from 0,
-    else in eight interleaved partial sums combined pairwise, the rest added after."""
-    if n < 8:
-        res = 0.0
-        for i in range(lo, lo + n):
-            res += a[i]
-        return res
-    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-    i = 8
-    while i < n - n % 8:
-        q = lo + i
-        r0 += a[q]
-        r1 += a[q + 1]
-        r2 += a[q + 2]
-        r3 += a[q + 3]
-        r4 += a[q + 4]
-        r5 += a[q + 5]
-        r6 += a[q + 6]
-        r7 += a[q + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[lo + i]
-        i += 1
-    return res
-
-
-@njit(cache=True)
-def _pairwise_sum(a, lo, n):  # pragma: no cover - numba
-    """The sum of ``a[lo : lo + n]`` (contiguous float64) as NumPy's ``add.reduce`` sums it: blocks of at most 128
-    (:func:`_pairwise_block`), a longer stretch split in two halves (the first a multiple of 8) summed apart and
-    added: the same value bit for bit. The recursion unrolled on a stack (a stretch's start, length, and the sum
-    of its first half once known)."""
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    starts = np.empty(64, np.int64)
-    lengths = np.empty(64, np.int64)
-    firsts = np.empty(64)
-    halves = np.zeros(64, np.int64)  # 0: neither half summed, 1: the first
-    starts[0], lengths[0], sp = lo, n, 1
-    while True:
-        top = sp - 1
-        m = lengths[top]
-        if m > 128:  # split: its first half first (a stretch on top has neither half summed yet)
-            h = m // 2
-            h -= h % 8
-            starts[sp], lengths[sp], halves[sp] = starts[top], h, 0
-            sp += 1
-            continue
-        val = _pairwise_block(a, starts[top], m)
-        sp -= 1
-        # hand the sum up: the first half of its parent waits for the second, the second completes the parent
-        while sp > 0:
-            parent = sp - 1
-            h = lengths[parent] // 2
-            h -= h % 8
-            if halves[parent] == 0:
-                firsts[parent], halves[parent] = val, 1
-                starts[sp], lengths[sp], halves[sp] = starts[parent] + h, lengths[parent] - h, 0
-                sp += 1
-                break
-            val = firsts[parent] + val
-            sp -= 1
-        if sp == 0:
-            return val
 
 
 @njit(cache=True)
@@ -1690,7 +1616,7 @@ def nearer_than_fit(camera: StereoCamera, fit: PlaneFit, disparity_left: np.ndar
     c_s, c_o = float(plane.along(cam.translation)), float(plane.offset(cam.translation))
     cov = np.asarray(fit.cov_R, dtype=float)
     z = _nearer_than_fit(
-        disparity_left, 0, disparity_left.shape[0], 0, disparity_left.shape[1], u_left,
+        disparity_left, u_left,
         np.asarray(v_top, dtype=np.float64), np.asarray(v_bottom, dtype=np.float64),
         np.asarray(slope, dtype=np.float64), int(window_px // 2) + 1, int(window_px) + 2,
         float(camera.cu), float(camera.f), cth, sth, sth, -cth, float(plane.direction[0]),
@@ -1715,21 +1641,22 @@ def _small_median(vals, k):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _nearer_than_fit(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o0, o1, cu, f, fx, fy, rx, ry, dx, dy, nx,
-                     ny, c_s, c_o, a, b, s0, fb, sigma_nu, window, caa, cab, cbb):  # pragma: no cover - numba
+def _nearer_than_fit(disp, u_left, v_top, v_bottom, slope, o0, o1, cu, f, fx, fy, rx, ry, dx, dy, nx, ny, c_s, c_o, a,
+                     b, s0, fb, sigma_nu, window, caa, cab, cbb):  # pragma: no cover - numba
     """:func:`nearer_than_fit`'s scores, one pass over the lines' samples (the fitted wall's σ of disparity at each
     line's column from its covariance ``[[caa, cab], [cab, cbb]]`` of ``(a, b)``); the fitted wall's disparity
     computed once per column, when a sample there first holds a disparity. Every ``step``-th row (a fifth of a
     window: the rows of one window share their errors, so the median loses next to nothing), counted as such in
     the error."""
     n = len(u_left)
+    H, W = disp.shape
     out = np.full(n, np.nan)
     vals = np.empty(o1 - o0)
-    d_fit = np.full(max(0, c1 - c0), np.nan)
+    d_fit = np.full(W, np.nan)
     step = max(1, int(window) // 5)
     for i in range(n):
-        v0 = max(int(np.ceil(v_top[i])), r0)
-        v1 = min(int(np.floor(v_bottom[i])), r1 - 1)
+        v0 = max(int(np.ceil(v_top[i])), 0)
+        v1 = min(int(np.floor(v_bottom[i])), H - 1)
         if v1 - v0 < 4:
             continue
         n_rows = v1 - v0 + 1
@@ -1751,18 +1678,18 @@ def _nearer_than_fit(disp, r0, r1, c0, c1, u_left, v_top, v_bottom, slope, o0, o
                 k = 0
                 for off in range(o0, o1):
                     col = int(np.rint(u_row + float(side * off)))
-                    if col < c0 or col >= c1:
+                    if col < 0 or col >= W:
                         continue
                     x = float(disp[v, col])
                     if not np.isfinite(x):
                         continue
-                    w = d_fit[col - c0]
+                    w = d_fit[col]
                     if np.isnan(w):
                         xn = (float(col) - cu) / f
                         wx, wy = fx + xn * rx, fy + xn * ry
                         r_s, r_o = wx * dx + wy * dy, wx * nx + wy * ny
                         depth = (a + b * (c_s - s0) - c_o) / (r_o - b * r_s)
-                        w = d_fit[col - c0] = fb / depth if depth > 0 else np.inf
+                        w = d_fit[col] = fb / depth if depth > 0 else np.inf
                     if not np.isfinite(w):
                         continue
                     vals[k] = x - w

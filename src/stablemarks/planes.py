@@ -609,22 +609,10 @@ def _reweight(s, o, sigma_o, w_all, inl, a: float, b: float, s0: float, outlier_
 
 
 def _reweight_sum(s, o, sigma_o, w_all, inl, a: float, b: float, s0: float, outlier_sigma: float):
-    """:func:`_reweight` and the sum of the new inliers' weights, NumPy's ``wgt.sum()`` (:func:`_pairwise_sum`):
-    ``(scale, inl, wgt, s_in, o_in, sum_w)``. The median partitions the residuals in place (they are this call's
-    own): the same partition as :func:`median`'s copy."""
-    res, absres = _residuals(s, o, sigma_o, inl, a, b, s0)
-    k = len(absres) // 2
-    absres.partition(k)
-    mid = float(absres[k]) if len(absres) % 2 else float((absres[:k].max() + absres[k]) / 2)
-    scale = max(1e-3, 1.4826 * mid)
-    return (scale, *_inliers_sum(res, outlier_sigma * scale, w_all, s, o))
-
-
-@njit(cache=True)
-def _inliers_sum(res, limit, w_all, s, o):  # pragma: no cover - numba
-    """:func:`_inliers` and the sum of the inliers' weights as NumPy's ``sum`` adds them (:func:`_pairwise_sum`)."""
-    new, wgt, s_in, o_in = _inliers(res, limit, w_all, s, o)
-    return new, wgt, s_in, o_in, _pairwise_sum(wgt, 0, wgt.shape[0])
+    """:func:`_reweight` and the sum of the new inliers' weights as NumPy's ``wgt.sum()`` adds them
+    (:func:`_pairwise_sum`): ``(scale, inl, wgt, s_in, o_in, sum_w)``."""
+    scale, new, wgt, s_in, o_in = _reweight(s, o, sigma_o, w_all, inl, a, b, s0, outlier_sigma)
+    return scale, new, wgt, s_in, o_in, _pairwise_sum(wgt, 0, wgt.shape[0])
 
 
 @njit(cache=True)
@@ -676,8 +664,7 @@ def _pairwise_sum(a, lo, n):  # pragma: no cover - numba
     """The sum of ``a[lo : lo + n]`` (contiguous float64) as NumPy's ``add.reduce`` sums it, bit for bit: blocks of at
     most 128 (:func:`_pairwise_block`), a longer stretch split in two halves (the first a multiple of 8) summed apart
     and added. The recursion unrolled on a stack (a stretch's start, length, and the sum of its first half once
-    known): numba's cache does not load recursive functions safely. (The same as ``landmarks._pairwise_sum``, which
-    this module cannot import.)"""
+    known): numba's cache does not load recursive functions safely. (:mod:`stablemarks.landmarks` uses it too.)"""
     if n <= 128:
         return _pairwise_block(a, lo, n)
     starts = np.empty(64, np.int64)
@@ -853,26 +840,20 @@ def _wall_points(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu):  #
 
 @njit(cache=True)
 def _band_counts(disp, v0, d, sigma_d, v_top, v_bottom, gate, row_margin, i_half, k_half):  # pragma: no cover - numba
-    """:func:`_band` of the box ``disp`` (first row ``v0``), with what :func:`fit_plane` checks next in the same pass:
-    the band's pixels, the columns holding any, and its pixels in rows ``i_half, i_half + 2, …`` and columns
-    ``k_half, k_half + 2, …``. The same test per pixel as :func:`_band`."""
-    h, K = disp.shape
-    band = np.empty((h, K), dtype=np.bool_)
+    """:func:`_band` of the box ``disp`` (first row ``v0``) with what :func:`fit_plane` checks next: the band's pixels,
+    the columns holding any, and its pixels in rows ``i_half, i_half + 2, …`` and columns ``k_half, k_half + 2, …``
+    (one pass over the mask, in place of three NumPy reductions)."""
+    band = _band(disp, v0, d, sigma_d, v_top, v_bottom, gate, row_margin)
+    h, K = band.shape
     seen = np.zeros(K, dtype=np.uint8)
     n = 0
     n_half = 0
     for i in range(h):
-        v = v0 + i
         row = band[i]
         c = 0
         for k in range(K):
-            x = float(disp[i, k])
-            # a zero disparity is a point at infinity: never on a wall
-            ok = ((abs(x - d[k]) <= gate * sigma_d[k]) & (x > 0)
-                  & (v >= v_top[k] - row_margin) & (v <= v_bottom[k] + row_margin))
-            row[k] = ok
-            c += ok
-            seen[k] |= ok
+            c += row[k]
+            seen[k] |= row[k]
         n += c
         if c and (i - i_half) % 2 == 0:
             for k in range(k_half, K, 2):
@@ -887,26 +868,17 @@ def _band_counts(disp, v0, d, sigma_d, v_top, v_bottom, gate, row_margin, i_half
 def _wall_points_weights(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu):  # pragma: no cover - numba
     """:func:`_wall_points` with each point's weight ``1 / σ_o²`` and box column: ``(s, o, σ_o, w, column)`` (n,),
     the same arithmetic (and ``w`` that of ``1.0 / σ_o**2``)."""
-    h, K = disp.shape
-    n = 0
-    for i in range(i0, h, step):
-        for k in range(k0, K, step):
-            n += band[i, k]
-    s = np.empty(n)
-    o = np.empty(n)
-    sigma = np.empty(n)
-    w = np.empty(n)
+    s, o, sigma = _wall_points(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu)
+    n = s.shape[0]
+    h, K = band.shape
     column = np.empty(n, dtype=np.int64)
-    n = 0
-    for i in range(i0, h, step):
+    j = 0
+    for i in range(i0, h, step):  # the points' columns, in _wall_points' (row-major) order
         for k in range(k0, K, step):
             if band[i, k]:
-                Z = fb / float(disp[i, k])
-                s[n] = c_s + Z * r_s[k]
-                o[n] = c_o + Z * r_o[k]
-                sigma[n] = abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6
-                column[n] = k
-                n += 1
+                column[j] = k
+                j += 1
+    w = np.empty(n)
     for j in range(n):  # in a loop of its own: it vectorizes
         w[j] = 1.0 / (sigma[j] * sigma[j])
     return s, o, sigma, w, column
@@ -938,8 +910,8 @@ def _on_line_region(region, v0, c0, disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu
     three divisions a pixel, which bound its time. Here ``σ`` is first taken with ``1 / fb`` as a factor (a few
     roundings apart from the exact one, ~1e-15 relative) and ``|r| <= limit · σ`` tested with a margin of 1e-12:
     a pixel inside ``limit (1 − 1e-12)`` passes the exact test, one beyond ``limit (1 + 1e-12)`` fails it, whatever
-    the roundings; a row with a band pixel between the two (hardly ever one) is tested again exactly as
-    :func:`_on_line` does. One division a pixel, the loop still branch-free (twice as fast). A limit that is not a
+    the roundings; a row with a band pixel between the two (hardly ever one) is tested again by :func:`_on_line`
+    itself. One division a pixel, the loop still branch-free (twice as fast). A limit that is not a
     positive number: the exact test everywhere."""
     h, K = disp.shape
     exact = not (limit > 0.0 and limit < np.inf)
@@ -960,12 +932,7 @@ def _on_line_region(region, v0, c0, disp, band, r_s, r_o, c_s, c_o, fb, sigma_nu
             row[k] = band[i, k] & inside
             n_unsure += band[i, k] & ~inside & (r <= hi_limit * sigma)
         if n_unsure or exact:
-            for k in range(K):
-                Z = fb / float(disp[i, k])
-                s = c_s + Z * r_s[k]
-                o = c_o + Z * r_o[k]
-                row[k] = band[i, k] & (abs((o - a - b * (s - s0)) / (abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6))
-                                       <= limit)
+            row[:] = _on_line(disp[i : i + 1], band[i : i + 1], r_s, r_o, c_s, c_o, fb, sigma_nu, a, b, s0, limit)[0]
         kept = row.view(np.uint8)
         for k in range(K):
             count += kept[k]

@@ -1185,6 +1185,7 @@ def landmarks_on_plane(
     disparity_range: tuple[float, float] | None = None,
     unusable: dict[str, str] | None = None,
     memo: dict | None = None,
+    boundaries_only: bool = False,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection.
 
@@ -1207,6 +1208,9 @@ def landmarks_on_plane(
     features modelled from one boundary, each line's nearer-side test, the silhouettes) is taken from the earlier
     call instead of computed again (:func:`~stablemarks.pipeline.select_landmarks` models a wall again without
     boundaries :func:`boundaries_apart` flags: ~1 ms a wall). The result is the one computed afresh.
+    ``boundaries_only``: stop once the boundaries are found and checked, before any feature is modelled (no
+    candidates): what :func:`boundaries_apart` reads, so that a wall is modelled once, from the boundaries that
+    are usable in the frame (with ``memo``, the later full call does not search again).
     """
     if memo is None:
         memo = {}
@@ -1298,8 +1302,8 @@ def landmarks_on_plane(
                 for b in out:
                     boundaries.remove(b)
                     rejected.append((b, why))
-    if not boundaries:
-        return PlaneLandmarks(fit, [], members, [], rejected, searched)
+    if not boundaries or boundaries_only:
+        return PlaneLandmarks(fit, boundaries, members, [], rejected, searched)
     ref = min(boundaries, key=lambda b: b.sigma_along)
     features = memo.get("features")
     if features is None or features[0] is not ref:  # the features modelled from this very boundary

@@ -777,25 +777,26 @@ def select_landmarks(
                 f"(columns {pred.window[0]}–{pred.window[1]}): {fit.reason}"
             )
             continue
-        memos.append({})  # what the wall's model computed, for modelling it again below without reading it anew
-        model = landmarks_on_plane(**{**plane_args, "fit": fit, "memo": memos[-1]})
+        memos.append({})  # what the wall's search computed, for modelling it below without reading it anew
+        model = landmarks_on_plane(**{**plane_args, "fit": fit, "memo": memos[-1], "boundaries_only": True})
         warnings += [why for _, why in model.rejected_boundaries]
         t_model += time.perf_counter() - tb
         if fit.plane.free_edges and not model.boundaries:
             warnings.append(f"plane {fit.plane.label!r}: no free edge found in view; its features are not modelled")
         models.append(model)
     # boundaries of different walls whose distance the map contradicts: neither is used (landmarks.boundaries_apart);
-    # their walls are modelled again without them
+    # each wall is then modelled once, from the boundaries that are left
+    tb = time.perf_counter()
     apart = boundaries_apart(models, config.landmarks)
-    if apart:
-        for n, m in enumerate(models):
-            skip = {edge: why for (plane_id, edge), why in apart.items() if plane_id == m.fit.plane.id}
-            if skip:
-                models[n] = landmarks_on_plane(**{**plane_args, "fit": m.fit, "unusable": skip, "memo": memos[n]})
-                warnings += [why for _, why in models[n].rejected_boundaries if why in skip.values()]
-                if m.fit.plane.free_edges and not models[n].boundaries:
-                    warnings.append(f"plane {m.fit.plane.label!r}: no free edge found in view; its features are not "
-                                    "modelled")
+    for n, m in enumerate(models):
+        skip = {edge: why for (plane_id, edge), why in apart.items() if plane_id == m.fit.plane.id}
+        models[n] = landmarks_on_plane(**{**plane_args, "fit": m.fit, "unusable": skip or None, "memo": memos[n]})
+        if skip:
+            warnings += [why for _, why in models[n].rejected_boundaries if why in skip.values()]
+            if m.fit.plane.free_edges and not models[n].boundaries:
+                warnings.append(f"plane {m.fit.plane.label!r}: no free edge found in view; its features are not "
+                                "modelled")
+    t_model += time.perf_counter() - tb
     # walls whose own lines scatter about their fit give nothing; then the off-wall test once more with the line
     # noise the frame's own lines show, when below the model's (landmarks.off_wall_by_lines)
     before = [len(m.rejected_boundaries) for m in models]

@@ -202,6 +202,8 @@ def test_a_boundary_at_the_silhouette_of_something_nearer_is_not_used():
     with_rule = found[0.5]
     assert not with_rule.boundaries and not any(c.selected for c in with_rule.candidates)
     assert any("silhouette of something nearer" in why for _, why in with_rule.rejected_boundaries)
+    # the end is hidden, not missed: it is no evidence of a wrong pan (localizer._edges_missing)
+    assert with_rule.hidden == ["p2"] and "p2" in with_rule.searched and without.hidden == []
 
 
 def test_ends_too_far_apart_that_the_pose_cannot_tell_apart_are_neither_used():

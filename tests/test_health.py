@@ -231,3 +231,23 @@ def test_update_pose_is_the_kalman_update_and_keeps_p_psd(lab_scenario):
     assert np.allclose(ekf.cov, (np.eye(len(x0)) - K @ Hf) @ P0)
     assert m2 == pytest.approx(nu @ np.linalg.solve(S, nu))
     assert np.array_equal(ekf.cov, ekf.cov.T) and np.all(np.linalg.eigvalsh(ekf.cov) >= -1e-12)
+
+
+def test_an_end_hidden_behind_something_nearer_is_not_a_missed_edge():
+    """Office, a clean recording, frames 84–87: the white board's one free end in view was hidden behind a coat
+    stand's pole (found as the silhouette of something nearer), and three frames of it made ``edges_not_found``
+    blame the pan. A hidden end counts neither as found nor as missed; a missed one still does."""
+    from types import SimpleNamespace
+
+    from stablemarks.config import Config
+    from stablemarks.localizer import _edges_missing
+
+    def frame(**plane):
+        m = SimpleNamespace(**{"gated": "", "boundaries": [], "searched": ["p2"], "hidden": [], **plane})
+        return SimpleNamespace(planes=[m], predictions=[], fits=[])
+
+    assert _edges_missing(frame(), Config(), 640)  # searched, not found
+    assert not _edges_missing(frame(hidden=["p2"]), Config(), 640)  # found hidden behind something nearer
+    assert not _edges_missing(frame(boundaries=[object()]), Config(), 640)  # found
+    # two searched ends, one hidden and one missed: the missed one is all the evidence, and it is missed
+    assert _edges_missing(frame(searched=["p1", "p2"], hidden=["p2"]), Config(), 640)

@@ -6,8 +6,9 @@ condition's name first):
 
 ``edges_not_found``
     a free edge searched in each of ``edges_frames`` frames in a row (predicted in the searchable image) was
-    not found, or found where the map does not put it, or the walls in view were turned together from the map
-    (their slopes share one turn far beyond the heading's uncertainty and agree on it,
+    not found, or found where the map does not put it (an end found hidden behind something nearer that the map
+    does not hold counts neither way: it is no evidence about the pan), or the walls in view were turned together
+    from the map (their slopes share one turn far beyond the heading's uncertainty and agree on it,
     :func:`stablemarks.landmarks.common_turn`: a wrong pan turns every wall the same way, a slip or a kidnap
     shifts them): the head's pan (or the pose) is probably wrong. While it holds nothing is associated, updated
     or entered: the walls are not where the pan says, so the pose follows the odometry; a frame whose walls are

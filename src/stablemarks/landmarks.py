@@ -1165,6 +1165,10 @@ class PlaneLandmarks:
     gated: str = ""
     """Why the fitted wall was not used (:func:`fit_disagreements`): ``"turned"`` from the map (its free edges in
     view are then counted as searched and not found), ``"shifted"``, or ``""`` (used)."""
+    hidden: list[str] = field(default_factory=list)
+    """The searched free edges whose boundary was found to be the silhouette of something nearer standing in front
+    of the wall (:func:`occluded_boundary`): the wall's end is hidden from this view, which says nothing about
+    where the head looks (:func:`~stablemarks.localizer._edges_missing` does not count them as missed)."""
 
 
 def landmarks_on_plane(
@@ -1246,7 +1250,7 @@ def landmarks_on_plane(
         members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
         memo["members"] = members, idx, members_u
     members, idx, members_u = memo["members"]
-    boundaries, rejected, searched = [], [], []
+    boundaries, rejected, searched, hidden = [], [], [], []
     w_sad = boundary_window(config, window_px)
     for edge in fit.plane.free_edges:
         if ("edge", edge) not in memo:
@@ -1266,9 +1270,11 @@ def landmarks_on_plane(
             continue
         if ("checked", edge) not in memo:
             memo[("checked", edge)] = _boundary_checks(camera, fit, b, config, window_px, cov_X, disparity_left)
-        why = memo[("checked", edge)]
+        why, occluded = memo[("checked", edge)]
         if why:
             rejected.append((b, why))
+            if occluded:
+                hidden.append(edge)
             continue
         boundaries.append(b)
     if len(boundaries) == 2:
@@ -1303,7 +1309,7 @@ def landmarks_on_plane(
                     boundaries.remove(b)
                     rejected.append((b, why))
     if not boundaries or boundaries_only:
-        return PlaneLandmarks(fit, boundaries, members, [], rejected, searched)
+        return PlaneLandmarks(fit, boundaries, members, [], rejected, searched, hidden=hidden)
     ref = min(boundaries, key=lambda b: b.sigma_along)
     features = memo.get("features")
     if features is None or features[0] is not ref:  # the features modelled from this very boundary
@@ -1350,7 +1356,7 @@ def landmarks_on_plane(
         cands = [_replace(c, selected=False, reason=REASON_BESIDE_NEARER)
                  if c.selected and _at_silhouette(camera, c, sil, config.boundary_sigma) else c
                  for c in cands]
-    return PlaneLandmarks(fit, boundaries, members, cands, rejected, searched)
+    return PlaneLandmarks(fit, boundaries, members, cands, rejected, searched, hidden=hidden)
 
 
 def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right, members_u, config: LandmarkConfig,
@@ -1405,20 +1411,21 @@ def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right
 
 
 def _boundary_checks(camera: StereoCamera, fit: PlaneFit, b: Boundary, config: LandmarkConfig, window_px: float,
-                     cov_X, disparity_left) -> str:
-    """Why :func:`landmarks_on_plane` does not use the boundary ``b`` it found (the silhouette of something nearer,
-    or too far from the map's edge for the pose), "" when it does."""
+                     cov_X, disparity_left) -> tuple[str, bool]:
+    """Why :func:`landmarks_on_plane` does not use the boundary ``b`` it found ("" when it does), and whether that
+    is because it is the silhouette of something nearer (the wall's end hidden) rather than too far from the map's
+    edge for the pose."""
     edge = b.edge
     if disparity_left is not None and config.nearer_fraction < 1.0 and \
             occluded_boundary(camera, fit, disparity_left, b, window_px, config.nearer_fraction):
         return (f"plane {fit.plane.label!r}: the boundary found at {edge} is the silhouette of "
-                "something nearer standing in front of the wall, not its end: not used")
+                "something nearer standing in front of the wall, not its end: not used"), True
     if cov_X is not None:
         off, sigma = boundary_disagreement(b, fit.plane, fit.X, cov_X)
         if abs(off) > config.boundary_gate_sigma * sigma:
             return (f"plane {fit.plane.label!r}: the boundary found at {edge} is {100 * off:+.1f} cm "
-                    f"along the wall from the map's free edge (σ {100 * sigma:.1f} cm): not used")
-    return ""
+                    f"along the wall from the map's free edge (σ {100 * sigma:.1f} cm): not used"), False
+    return "", False
 
 
 def nearer_silhouettes(camera: StereoCamera, X, cov_X, world_map: Map, plane, min_offset: float = 0.1,

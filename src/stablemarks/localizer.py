@@ -286,7 +286,9 @@ def _edges_missing(model: FrameLandmarks | None, config: Config, width: int) -> 
     # its band (a wall behind a screen while the heading is uncertain).
     turned = sum(m.gated == "turned" for m in model.planes)
     pan_like = turned >= 2 and all(m.gated for m in model.planes)
-    expected = sum(len(m.searched) for m in model.planes if m.gated != "turned" or pan_like)
+    # an end found to be hidden behind something nearer (unmapped clutter in front of the wall) is where the map
+    # puts it as far as the pan is concerned: neither found nor missed
+    expected = sum(len(m.searched) - len(m.hidden) for m in model.planes if m.gated != "turned" or pan_like)
     expected += sum(sum(1 for e in pred.edges.values() if searchable(e))
                     for pred, fit in zip(model.predictions, model.fits, strict=True) if not fit)
     found = sum(len(m.boundaries) for m in model.planes)

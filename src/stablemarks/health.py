@@ -21,7 +21,9 @@ condition's name first):
 ``odometry_disagrees``
     a wall's pattern of landmarks was matched along the wall (which does not depend on the pose) but the whole
     pattern is incompatible with the predicted pose, in ``disagree_frames`` frames in a row: the odometry and
-    the images disagree (a wheel slip, a kidnap). The localizer then widens the pose covariance just enough for
+    the images disagree (a wheel slip, a kidnap). A pattern counts only if one of its landmarks was observed again
+    since the frame that entered it: landmarks entered one odometry step ago that already disagree were more likely
+    entered wrong (under a wrong pan) than witness a slip. The localizer then widens the pose covariance just enough for
     the pattern to fit (:meth:`stablemarks.Localizer.step`) and updates from it. When no landmark and no pattern
     is found at all (a kidnap that moved the walls beyond even the widened bands) in ``relocalize_frames`` frames
     in a row while the walls fitted in the frame disagree with the pose, or a frame finds fewer than half the

@@ -766,6 +766,14 @@ class Localizer:
                 method.associate(self.ekf, front, wide, pan, cam_k, wide_report, self._max_incidence)
                 if wide_report.get("incompatible") and not wide_report.get("compatible"):
                     model, report = wide, wide_report
+            if report.get("incompatible"):
+                # A pattern of landmarks none of which was observed again since the frame that entered it is no
+                # witness of a slip: the pose they disagree with is one odometry step from the one they were
+                # modelled from, and a bad entry (a wrong pan, a misplaced boundary) is the likelier cause (the hall,
+                # every pan 0.2 rad off: four landmarks entered at frame 15 widened the pose ×4096 at frame 16 and
+                # pulled it 1.4 m along their wall). Such landmarks are simply not associated in this frame.
+                report = {**report, "incompatible": [m for m in report["incompatible"]
+                                                     if any(self.ekf.landmark(i).n_observed for i, _ in m)]}
             disagree = bool(report.get("incompatible")) and not report.get("compatible") and \
                 max(len(m) for m in report["incompatible"]) >= self.config.health.min_pattern
             relocated = walls = None

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from stablemarks.errors import InputError
 from stablemarks.geometry import StereoCamera
 from stablemarks.maps import Map, ReferencePlane
 from stablemarks.planes import (
@@ -177,6 +178,43 @@ def test_shared_disparity_bias_jacobian_matches_finite_differences(wall):
     assert abs(J_b - J[1]) <= 0.02 * abs(J[0]) / wall.length
     # a wall 4 m away moves by about Z²/(f b) per pixel of disparity
     assert abs(J[0]) > 0.5 * 4.0**2 / (CAM.f * CAM.baseline)
+
+
+@pytest.mark.parametrize("wall", [PARTITION, ReferencePlane("angled", (-1.0, 3.0), (1.5, 5.0), z=(0.0, 2.0))])
+def test_disparity_tilt_jacobian_matches_finite_differences(wall):
+    """``planes.disparity_tilt_px``: a disparity error ``γ x(u)``, ``x`` from −1 to 1 across the wall's fitted
+    columns, enters the line's covariance as ``σ_γ² J Jᵀ`` with ``J = ∂(a, b)/∂γ``; adding ``±h x(u)`` to the
+    pixels and fitting again gives ``J`` numerically. It turns the line: the slope moves, the offset at the
+    pixels' mean position along the wall hardly."""
+    disp = synthetic_disparity(CAM, X0, [wall], noise=0.05, rng=np.random.default_rng(7))
+    pred = predict_plane(CAM, X0, COV0, wall)
+    sigma = 0.05
+    with_tilt = fit_plane(CAM, X0, disp, pred, PlaneConfig(disparity_tilt_px=sigma))
+    without = fit_plane(CAM, X0, disp, pred, PlaneConfig())
+    assert with_tilt and without
+    added = (with_tilt.cov_R - without.cov_R) / sigma**2
+    assert_psd(with_tilt.cov_R)
+    assert added[0, 0] * added[1, 1] - added[0, 1] ** 2 == pytest.approx(0.0, abs=1e-9 * added[1, 1])
+    cols = np.flatnonzero(without.region.any(axis=0))
+    u = np.arange(disp.shape[1], dtype=float)
+    x = ((u - 0.5 * (cols[0] + cols[-1])) / (0.5 * (cols[-1] - cols[0])))[None, :]
+    h = 1e-3
+    up = fit_plane(CAM, X0, (disp + h * x).astype(np.float32), pred, PlaneConfig())
+    down = fit_plane(CAM, X0, (disp - h * x).astype(np.float32), pred, PlaneConfig())
+    J = (np.array([up.a, up.b]) - np.array([down.a, down.b])) / (2 * h)
+    J_b = np.copysign(np.sqrt(added[1, 1]), J[1])
+    J_a = added[0, 1] / J_b
+    assert J_b == pytest.approx(J[1], rel=0.05)
+    assert abs(J_a - J[0]) <= 0.05 * abs(J[1]) * wall.length
+    # the slope's change is that of the end columns' depths moving oppositely by about Z²/(f b) per pixel
+    assert abs(J[1]) > 0.1 * 3.0**2 / (CAM.f * CAM.baseline) / wall.length
+
+
+def test_disparity_error_settings_are_validated():
+    for name in ("disparity_bias_px", "disparity_tilt_px"):
+        for bad in (-0.1, float("nan"), "0.1", True):
+            with pytest.raises(InputError, match=f"planes.{name}"):
+                PlaneConfig(**{name: bad})
 
 
 @pytest.mark.slow

@@ -84,7 +84,18 @@ class PlaneConfig:
     boundary's σ, ``noise.boundary_px``), and the office then had three trials with NEES peaks of 225–954. Set it
     when the fitted walls themselves are used, or once the boundary's σ can be measured smaller."""
 
+    disparity_tilt_px: float = 0.0
+    """σ of a disparity error that changes linearly across one wall's fitted columns [px, at either end of them,
+    zero in their middle], added to the fitted line's covariance like ``disparity_bias_px``: the part of the
+    wall-shared error that turns the fitted line, whose slope error becomes a scale error along the wall. Measured
+    at the true pose by regressing each wall's per-pixel disparity error on its column (``python
+    benchmarks/pixel_locking.py``): 0.04–0.11 px RMS on the built-in scenes. Default 0 (see docs/uncertainty.md)."""
+
     def __post_init__(self) -> None:
+        for name in ("disparity_bias_px", "disparity_tilt_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v >= 0):
+                raise InputError(expected("a non-negative number of pixels", v, where=f"planes.{name}"))
         if self.fit_covariance not in FIT_COVARIANCES:
             raise InputError(expected(f"one of {', '.join(FIT_COVARIANCES)}", self.fit_covariance,
                                       where="planes.fit_covariance"))
@@ -542,13 +553,21 @@ def fit_plane(
     cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
     if clustered:
         cov_R = _at_least(cov_R, _sandwich(N_inv, scores))
-    if config.disparity_bias_px > 0:
+    if config.disparity_bias_px > 0 or config.disparity_tilt_px > 0:
         # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,
         # o − c_o), Z the pixel's depth; the line (a, b) follows through the weighted least squares
         depth = (s_in - c_s) * (fwd @ plane.direction) + (o_in - c_o) * (fwd @ plane.normal)
         g = -(depth / fb) * ((o_in - c_o) - b * (s_in - c_s))
-        J_beta = N_inv @ np.array([wgt @ g, w_ds @ g])
-        cov_R = cov_R + config.disparity_bias_px**2 * np.outer(J_beta, J_beta)
+        if config.disparity_bias_px > 0:
+            J_beta = N_inv @ np.array([wgt @ g, w_ds @ g])
+            cov_R = cov_R + config.disparity_bias_px**2 * np.outer(J_beta, J_beta)
+        if config.disparity_tilt_px > 0:
+            # the error γ x(u) with x from −1 to 1 across the inliers' columns: each pixel's g times its x
+            col = column[inl].astype(np.float64)
+            lo, hi = float(col.min()), float(col.max())
+            g_x = g * ((col - 0.5 * (lo + hi)) / max(0.5 * (hi - lo), 1.0))
+            J_gamma = N_inv @ np.array([wgt @ g_x, w_ds @ g_x])
+            cov_R = cov_R + config.disparity_tilt_px**2 * np.outer(J_gamma, J_gamma)
     # every band pixel within the final limit, written into the image-sized region
     region = np.zeros(np.shape(disparity), dtype=bool)
     n_keep = _on_line_region(region, rows.start, cols.start, disp, band, *frame, a, b, s0, config.outlier_sigma * scale)

@@ -126,7 +126,7 @@ def former_landmarks_on_plane(
     members = members & (pairs.u_left >= lo) & (pairs.u_left <= hi)
     idx = np.flatnonzero(members)
     members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
-    boundaries, rejected, searched = [], [], []
+    boundaries, rejected, searched, hidden = [], [], [], []
     w_sad = boundary_window(config, window_px)
     for edge in fit.plane.free_edges:
         e = fit.prediction.edges[edge]
@@ -183,6 +183,7 @@ def former_landmarks_on_plane(
                 occluded_boundary(camera, fit, disparity_left, b, window_px, config.nearer_fraction):
             rejected.append((b, f"plane {fit.plane.label!r}: the boundary found at {edge} is the silhouette of "
                                 "something nearer standing in front of the wall, not its end: not used"))
+            hidden.append(edge)  # (since: the end hidden, not missed; landmarks.PlaneLandmarks.hidden)
             continue
         if cov_X is not None:
             off, sigma = boundary_disagreement(b, fit.plane, fit.X, cov_X)
@@ -223,7 +224,7 @@ def former_landmarks_on_plane(
                     boundaries.remove(b)
                     rejected.append((b, why))
     if not boundaries:
-        return PlaneLandmarks(fit, [], members, [], rejected, searched)
+        return PlaneLandmarks(fit, [], members, [], rejected, searched, hidden=hidden)
     ref = min(boundaries, key=lambda b: b.sigma_along)
     step = left_segments.contrast[pairs.left_index] / 4.0  # a Sobel_x response is 4× the step across an edge
     cands = model_features(camera, fit, ref, pairs, idx, step, config)
@@ -248,7 +249,7 @@ def former_landmarks_on_plane(
         cands = [_replace(c, selected=False, reason=REASON_BESIDE_NEARER)
                  if c.selected and _at_silhouette(camera, c, sil, config.boundary_sigma) else c
                  for c in cands]
-    return PlaneLandmarks(fit, boundaries, members, cands, rejected, searched)
+    return PlaneLandmarks(fit, boundaries, members, cands, rejected, searched, hidden=hidden)
 
 
 def former_select_landmarks(

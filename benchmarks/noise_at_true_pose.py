@@ -5,8 +5,9 @@ search covariance, so that gates are narrow but the method is the same): the pla
 searched as the localizer does. Printed per scenario:
 
 - boundaries snapped onto a member segment and free ones (the region's own border): the RMS and 99th percentile
-  of the column error against the true edge, the median modelled σ of that column, and the mean normalised
-  squared error (ideal 1);
+  of the column error against the true edge, the median modelled σ of that column, the mean normalised
+  squared error (ideal 1), and the error's mean and spread along the outward direction (a shift, not a spread:
+  a free boundary lies some pixels inward);
 - fitted walls: the mean and median normalised squared error of the offset ``a`` (ideal 1 and 0.455), without
   and with ``planes.disparity_bias_px`` set to ``--bias``, and the RMS of the offset error expressed as a
   disparity shared by the whole wall [px].
@@ -21,6 +22,7 @@ import numpy as np
 
 from stablemarks.config import Config
 from stablemarks.evaluation import trial_seeds
+from stablemarks.landmarks import _inner_columns
 from stablemarks.noisefit import SEARCH_POSE_COV
 from stablemarks.pipeline import run_front_end, select_landmarks
 from stablemarks.planes import fit_plane, predict_planes
@@ -47,7 +49,8 @@ def measure(name: str, frames: int, every: int, bias: float, config: Config) -> 
         for pm in model.planes:
             for b in pm.boundaries:
                 true_u = cam.project_columns(T, pm.fit.plane.edge(b.edge))
-                bnd[bool(b.snapped)].append((b.u[0] - true_u[0], b.sigma_u[0]))
+                outward = 1.0 if true_u[0] > _inner_columns(cam, T, pm.fit.plane, b.edge)[0] else -1.0
+                bnd[bool(b.snapped)].append((b.u[0] - true_u[0], b.sigma_u[0], outward))
         fb = cam.f * cam.baseline
         for pred in predict_planes(cam, T, SEARCH_POSE_COV, source.world_map, cfg.planes):
             fits = [fit_plane(cam, T, front.disparity.left, pred, pc) for pc in (cfg.planes, with_bias)]
@@ -62,10 +65,10 @@ def measure(name: str, frames: int, every: int, bias: float, config: Config) -> 
           f"{n_frames} frames")
     for snapped, rows in bnd.items():
         if rows:
-            e, s = np.array(rows).T
+            e, s, out = np.array(rows).T
             print(f"  {'snapped' if snapped else 'free   '} boundary: error RMS {np.sqrt(np.mean(e**2)):.2f} px, "
                   f"99 % within {np.percentile(np.abs(e), 99):.2f} px, modelled σ {np.median(s):.2f} px, "
-                  f"mean z² {np.mean((e / s) ** 2):.2f}")
+                  f"mean z² {np.mean((e / s) ** 2):.2f}; outward {np.mean(e * out):+.2f} ± {np.std(e * out):.2f} px")
     if z2[0]:
         print(f"  wall offset z²: mean {np.mean(z2[0]):.2f}, median {np.median(z2[0]):.2f} (ideal 1, 0.455); "
               f"with disparity_bias_px {bias:g}: mean {np.mean(z2[1]):.2f}, median {np.median(z2[1]):.2f}; "

@@ -360,11 +360,11 @@ class Localizer:
         """Landmarks found and missed among those predicted in view, over the frames where a pattern of at least
         ``health.min_pattern`` was used, plus :data:`FOUND_PRIOR`: the run's rate of finding landmarks in view."""
         self._lost_frames = 0
+        """Frames in a row with no landmark found and the walls fitted away from the pose (:meth:`_relocalize`)."""
         self._unconfirmed: set[int] = set()
         """Landmarks entered in a frame that observed none of the filter's landmarks (the pose then rested on the
         odometry alone), until they are observed again: the frame's lines do not relocalize the pose onto them
         (:meth:`_relocation_from_lines`)."""
-        """Frames in a row with no landmark found and the walls fitted away from the pose (:meth:`_relocalize`)."""
         self._turn_ref: _Turn | None = None
         """The last turn of the walls together while ``edges_not_found`` may hold (see :meth:`step`)."""
         self.health = HealthMonitor(self.config.health)
@@ -520,7 +520,6 @@ class Localizer:
         # end found 22 px off (at a coat stand's pole in front of it), and at frame 82 the frame's lines put the
         # pose 0.17 m off onto them, held with σ 6 mm (pose NEES 514, landmark NEES 487). After a slip or a
         # kidnap the landmarks entered while the pose was being observed still witness it.
-        self._unconfirmed = {i for i in self._unconfirmed if i in ekf.landmark_ids and not ekf.landmark(i).n_observed}
         ids = [i for i in ekf.landmark_ids if i not in self._unconfirmed]
         if len(ids) <= h.min_pattern:
             return None, 1.0
@@ -902,6 +901,10 @@ class Localizer:
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
                                        self.config, closed_planes=closed)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
+            if self._unconfirmed:  # confirmed once observed again (or gone)
+                present = set(self.ekf.landmark_ids)
+                self._unconfirmed = {i for i in self._unconfirmed
+                                     if i in present and not self.ekf.landmark(i).n_observed}
             if entered.ids and not record.observed and self.ekf.n_landmarks > len(entered.ids):
                 self._unconfirmed.update(int(i) for i in entered.ids)
             record.candidates, record.boundaries = model_log(model, rechecked)

@@ -102,6 +102,11 @@ def main() -> None:
     except ConfigError as e:
         ap.error(str(e))
     for name in args.scenarios:
+        try:
+            load_scenario(name)
+        except ConfigError as e:
+            ap.error(str(e))
+    for name in args.scenarios:
         report(name, line_errors(name, config, args.trials, args.frames, args.every, args.match))
 
 

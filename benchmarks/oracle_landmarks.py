@@ -95,6 +95,11 @@ def main() -> None:
         load_config(args.config)
     except ConfigError as e:
         ap.error(str(e))
+    for name in args.scenarios:
+        try:
+            load_scenario(name)
+        except ConfigError as e:
+            ap.error(str(e))
     sigma_m = None if args.sigma_mm is None else args.sigma_mm / 1000.0
     if (sigma_m if sigma_m is not None else args.sigma_px) <= 0:
         ap.error("the landmark σ must be positive")

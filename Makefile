@@ -23,7 +23,7 @@ demo: $(STAMP_RUN)
 	$(BIN)/stablemarks demo --out results/demo
 
 test: $(STAMP_DEV)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --numprocesses=auto --maxprocesses=4
 
 lint: $(STAMP_DEV)
 	$(BIN)/ruff check .

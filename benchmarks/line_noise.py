@@ -31,9 +31,8 @@ from stablemarks.sim.scenario import load_scenario
 from stablemarks.sim.source import SimulatedSource
 
 
-def line_errors(name: str, config, trials: int, frames: int, every: int, match_px: float) -> list[tuple]:
-    """``(trial, frame, wall, edge id, error u_l, error u_r)`` [px] of every matched line."""
-    sc = load_scenario(name)
+def line_errors(sc, config, trials: int, frames: int, every: int, match_px: float) -> list[tuple]:
+    """``(trial, frame, wall, edge id, error u_l, error u_r)`` [px] of every matched line of scenario ``sc``."""
     rows = []
     for trial, seed in enumerate(trial_seeds(sc.seed, trials)):
         source = SimulatedSource(simulate_run(sc, seed), frames=frames)
@@ -97,17 +96,13 @@ def main() -> None:
     args = ap.parse_args()
     if args.trials < 1 or args.frames < 1 or args.every < 1 or args.match <= 0:
         ap.error("--trials, --frames and --every must be at least 1 and --match positive")
-    try:
+    try:  # all checked before the first is measured
         config = load_config(args.config)
+        scenarios = [(name, load_scenario(name)) for name in args.scenarios]
     except ConfigError as e:
         ap.error(str(e))
-    for name in args.scenarios:
-        try:
-            load_scenario(name)
-        except ConfigError as e:
-            ap.error(str(e))
-    for name in args.scenarios:
-        report(name, line_errors(name, config, args.trials, args.frames, args.every, args.match))
+    for name, sc in scenarios:
+        report(name, line_errors(sc, config, args.trials, args.frames, args.every, args.match))
 
 
 if __name__ == "__main__":

@@ -34,6 +34,8 @@ from stablemarks.sim.source import SimulatedSource
 
 def _true_landmarks(ekf, est, truth, pose, f: float, sigma_px: float | None, sigma_m: float | None) -> None:
     """Move the frame's entered wall landmarks onto their true features (diagnosis only: private state)."""
+    if not est.entered.ids:
+        return
     edges = {e.id: e for e in truth.edges}
     for c, i in zip(est.entered.candidates, est.entered.ids, strict=True):
         if i not in ekf.landmark_ids:
@@ -61,9 +63,7 @@ def _true_landmarks(ekf, est, truth, pose, f: float, sigma_px: float | None, sig
 
 
 def run_trial(task) -> tuple[str, np.ndarray]:
-    scenario, trial, config_file, sigma_px, sigma_m = task
-    config = load_config(config_file)
-    sc = load_scenario(scenario)
+    name, sc, trial, config, sigma_px, sigma_m = task
     run = simulate_run(sc, trial_seeds(sc.seed, trial + 1)[trial])
     source = SimulatedSource(run)
     config = config.with_source_defaults(source.config_defaults)
@@ -78,7 +78,7 @@ def run_trial(task) -> tuple[str, np.ndarray]:
         e = loc.ekf.pose - truth_pose
         e[2] = (e[2] + np.pi) % (2 * np.pi) - np.pi
         nees.append(float(e @ np.linalg.solve(loc.ekf.cov_pose, e)))
-    return scenario, np.array(nees)
+    return name, np.array(nees)
 
 
 def main() -> None:
@@ -91,19 +91,17 @@ def main() -> None:
     group.add_argument("--sigma-mm", type=float, help="landmark σ in millimetres instead")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
-    try:
-        load_config(args.config)
+    if args.trials < 1 or args.jobs < 1:
+        ap.error("--trials and --jobs must be at least 1")
+    try:  # loaded once here, handed to the workers
+        config = load_config(args.config)
+        scenarios = [(name, load_scenario(name)) for name in args.scenarios]
     except ConfigError as e:
         ap.error(str(e))
-    for name in args.scenarios:
-        try:
-            load_scenario(name)
-        except ConfigError as e:
-            ap.error(str(e))
     sigma_m = None if args.sigma_mm is None else args.sigma_mm / 1000.0
     if (sigma_m if sigma_m is not None else args.sigma_px) <= 0:
         ap.error("the landmark σ must be positive")
-    tasks = [(s, t, args.config, args.sigma_px, sigma_m) for s in args.scenarios for t in range(args.trials)]
+    tasks = [(name, sc, t, config, args.sigma_px, sigma_m) for name, sc in scenarios for t in range(args.trials)]
     results: dict[str, list[np.ndarray]] = {}
     with ProcessPoolExecutor(args.jobs) as ex:
         for scenario, nees in ex.map(run_trial, tasks):

@@ -430,9 +430,12 @@ def _textured(sobel: np.ndarray, config: SADConfig) -> np.ndarray:
 # pixels' minima never read back a store still in flight (store-to-load forwarding needs equal
 # addresses; a load overlapping a pending store at another offset stalls until it completes).
 #
-# Measured on 640×480 with 64 disparities (single thread, in ms, next to one StereoBM call of
-# about 11): the prefilter and allocations 0.6, column sums 1.4, costs 1.9, winners 2.5, second-best
-# costs 2.0, tests and refinement 1.8 (both images).
+# Measured on 640×480 with 64 disparities (single thread, lab frame, `stablemarks bench`, December 2026, numba
+# 0.68 on an AVX2 machine where one StereoBM call takes 14.5 ms): dense 22.2 ms, the pipeline's regions 8.7 ms.
+# Of the dense time, by cutting the row loop after each pass: column sums 2.6, costs 1.5, winners about 10 (the
+# left winner's lane reduction alone 6-9: numba types it in 64-bit lanes), the rest for the second-best costs
+# and the tests. Check the hot loops' assembly (``inspect_asm``) after a numba upgrade: with the left
+# reduction and the right minima in one loop, numba 0.68 vectorized neither and the winners pass took 35 ms.
 #
 # The hot loops index flat arrays with unsigned integers (no negative-index wraparound, no array
 # views per column), compute in the narrowest dtype (uint16 costs: 16 lanes per AVX2 operation)
@@ -702,9 +705,12 @@ def _winners(costs, best_left, key_left, near_left, best_right, j_right, segs, n
                 rb = x + off
                 best = best_left[x]
                 kk = zero  # 1 + the last lane (smallest j) holding the column's best cost
+                # two loops, not one: LLVM (numba 0.68) vectorizes neither the reduction nor the running minima when
+                # they share a loop (35 -> 10 ms a 640x480 frame for this pass alone)
+                for k in range(k0, k1):
+                    kk = max(kk, klane[k] if costs[cb + k] == best else zero)
                 for k in range(k0, k1):
                     c = costs[cb + k]
-                    kk = max(kk, klane[k] if c == best else zero)
                     jj = jlane[k]
                     b = best_right[rb + k]
                     jb = j_right[rb + k]

@@ -431,11 +431,12 @@ def _textured(sobel: np.ndarray, config: SADConfig) -> np.ndarray:
 # addresses; a load overlapping a pending store at another offset stalls until it completes).
 #
 # Measured on 640×480 with 64 disparities (single thread, lab frame, `stablemarks bench`, December 2026, numba
-# 0.68 on an AVX2 machine where one StereoBM call takes 14.5 ms): dense 22.2 ms, the pipeline's regions 8.7 ms.
-# Of the dense time, by cutting the row loop after each pass: column sums 2.6, costs 1.5, winners about 10 (the
-# left winner's lane reduction alone 6-9: numba types it in 64-bit lanes), the rest for the second-best costs
-# and the tests. Check the hot loops' assembly (``inspect_asm``) after a numba upgrade: with the left
-# reduction and the right minima in one loop, numba 0.68 vectorized neither and the winners pass took 35 ms.
+# 0.68, 2-core AVX2 machine, StereoBM 14-20 ms there): dense 15.6-17.1 ms, the pipeline's regions 7.1-7.8 ms.
+# Before the winners pass was rewritten: dense 46 ms, of it (the row loop cut after each pass) column sums 2.6,
+# costs 1.5 and winners 32-35: with the left winner's lane search and the right minima in one loop, numba 0.68
+# vectorized neither; split, the search ran in 64-bit lanes (6-9 ms). Now the left winner is an int32 key minimum
+# and the right minima have their own loop. Check the hot loops' assembly (``inspect_asm``) after a numba
+# upgrade: it changes no output, only the time (tests/test_sad_vectorized.py checks the winners pass).
 #
 # The hot loops index flat arrays with unsigned integers (no negative-index wraparound, no array
 # views per column), compute in the narrowest dtype (uint16 costs: 16 lanes per AVX2 operation)
@@ -695,20 +696,22 @@ def _winners(costs, best_left, key_left, near_left, best_right, j_right, segs, n
     right pixels' running minima along the diagonals, ``best_right[x + off + k]`` (cost) and ``j_right`` (its
     disparity index; among equal costs the smallest). Columns are visited _PHASES apart (see above), so ties
     are broken explicitly. ``jlane[k]``: lane k's disparity index, ``klane[k] = k + 1``. ``near_left`` (2, W):
-    the left winner's neighbouring costs, at j − 1 and j + 1 (for the sub-pixel refinement)."""
-    zero = costs.dtype.type(0)
+    the left winner's neighbouring costs, at j − 1 and j + 1 (for the sub-pixel refinement). (``best_left`` and
+    ``klane`` are no longer read: the key's minimum carries the best cost.)"""
     for s in range(n_seg):
         x0, x1, k0, k1 = _u64(segs[s, 0]), _u64(segs[s, 1]), _u64(segs[s, 2]), _u64(segs[s, 3])
         for phase in range(_u64(_PHASES)):
             for x in range(x0 + phase, x1, _u64(_PHASES)):
                 cb = x * stride
                 rb = x + off
-                best = best_left[x]
-                kk = zero  # 1 + the last lane (smallest j) holding the column's best cost
-                # two loops, not one: LLVM (numba 0.68) vectorizes neither the reduction nor the running minima when
-                # they share a loop (35 -> 10 ms a 640x480 frame for this pass alone)
+                # the left winner's key, cost · scale + j (the smallest j among equal costs), as an int32 minimum: in
+                # 32-bit lanes LLVM vectorizes it; the search for the last lane holding best_left[x] it kept in
+                # 64-bit lanes (6-9 ms a 640x480 frame). Then the right minima in a loop of their own: in one
+                # loop with the reduction, numba 0.68 vectorized neither (35 ms for this pass).
+                key = np.int32(2**31 - 1)
                 for k in range(k0, k1):
-                    kk = max(kk, klane[k] if costs[cb + k] == best else zero)
+                    key = min(key, np.int32(np.int32(costs[cb + k]) * scale + np.int32(jlane[k])))
+                kk = costs.dtype.type(n_disp - _u64(key & (scale - np.int32(1))))  # 1 + the winner's lane
                 for k in range(k0, k1):
                     c = costs[cb + k]
                     jj = jlane[k]
@@ -717,7 +720,7 @@ def _winners(costs, best_left, key_left, near_left, best_right, j_right, segs, n
                     better = (c < b) | ((c == b) & (jj < jb))
                     best_right[rb + k] = min(b, c)
                     j_right[rb + k] = jj if better else jb
-                key_left[x] = np.int32(np.int32(best) * scale + np.int32(n_disp - _u64(kk)))
+                key_left[x] = key
                 near_left[0, x] = costs[cb + _u64(kk)]  # lane kb + 1: j - 1 (lane D: the maximum)
                 near_left[1, x] = costs[cb + _u64(kk) - _u64(2)]  # lane kb - 1: j + 1
 

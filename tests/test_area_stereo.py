@@ -150,6 +150,25 @@ def test_winners_and_tests_equal_the_oracle(seed, shape, block_size, num_dispari
     assert res.valid.any() and not res.valid.all()
 
 
+def test_left_border_winners_ignore_the_padding():
+    """A left column near the left border has lanes whose right window leaves the image (they read the zero
+    padding); its winner, which the right image's left-right check reads, is taken over the lanes that fit only.
+    A black strip on the left of the left image against a bright right image makes the padding the cheapest
+    match, so a winner taken over every lane would differ from the oracle's."""
+    rng = np.random.default_rng(7)
+    H, W = 30, 90
+    left = rng.integers(0, 256, (H, W)).astype(np.uint8)
+    left[:, :40] = 0
+    right = rng.integers(100, 256, (H, W)).astype(np.uint8)
+    config = exact(block_size=5, num_disparities=16, uniqueness_ratio=0, lr_tolerance=1.0)
+    res = compute_disparity(left, right, config)
+    want_left, want_right, want_valid = oracle(left, right, config)
+    np.testing.assert_array_equal(res.valid, want_valid)
+    np.testing.assert_array_equal(res.left, want_left)
+    np.testing.assert_array_equal(res.right, want_right)
+    assert np.isfinite(want_right[:, : config.num_disparities]).any()  # right pixels that check a border column
+
+
 # ------------------------------------------------------------------------------------------------
 # synthetic pairs with known disparity
 

@@ -628,39 +628,33 @@ def _column_sums(colsum, lf, rf, y, r, n_cols, n_padded, off, n_disp, csegs, n_c
 
 # Winner-take-all keys pack a cost and its disparity index j into one int32, cost · scale + j with
 # scale = 2^shift > j, so that one min() finds the best cost and, among equal costs, the smallest
-# disparity. The costs pass keeps only each column's best cost (a minimum in the cost dtype); the
-# winner's index is found in the pass over the row's costs that follows (the second-best costs need it).
+# disparity. The costs pass only stores the costs; the left winner's key is their minimum, taken in the pass
+# over the row's costs that follows (the second-best costs need it).
 
 
 @njit(**_NJ)
-def _costs_and_winners(costs, colsum, window, best_left, x0, x1, r, n_disp, stride, k0, k1, top, advance):
+def _running_costs(costs, colsum, window, x0, x1, r, n_disp, stride, k0, k1, advance):
     """Costs of columns [x0, x1), lanes [k0, k1), as box sums along the row kept running in ``window`` (which
-    holds column x0 − 1's; with ``advance`` False it holds column x0's and x1 = x0 + 1), and each column's best
-    cost to ``best_left[x]``. All indices unsigned. (The running sums live in the small ``window`` rather than
-    in ``costs``, whose columns straddle cache lines: reading back a column just stored there would stall on
-    store-to-load forwarding.)"""
+    holds column x0 − 1's; with ``advance`` False it holds column x0's and x1 = x0 + 1). All indices unsigned.
+    (The running sums live in the small ``window`` rather than in ``costs``, whose columns straddle cache lines:
+    reading back a column just stored there would stall on store-to-load forwarding.)"""
     for x in range(x0, x1):
         ab = (x + r) * n_disp
         sb = (x - r - _u64(1)) * n_disp
         cb = x * stride
-        best = top
         if advance:
             for k in range(k0, k1):
                 c = window.dtype.type(window[k] + window.dtype.type(colsum[ab + k]) - window.dtype.type(colsum[sb + k]))
                 window[k] = c
                 costs[cb + k] = c
-                best = min(best, c)
         else:
             for k in range(k0, k1):
-                c = window[k]
-                costs[cb + k] = c
-                best = min(best, c)
-        best_left[x] = best
+                costs[cb + k] = window[k]
 
 
 @njit(**_NJ)
-def _row_costs(costs, colsum, window, best_left, segs, n_seg, r, n_disp, stride, top):
-    """The costs and each column's best cost of one row, segment by segment. A segment's first column continues the
+def _row_costs(costs, colsum, window, segs, n_seg, r, n_disp, stride):
+    """The costs of one row, segment by segment. A segment's first column continues the
     running sums of the lanes it shares with the column before it and sums the others afresh over 2r + 1
     columns."""
     nd = _u64(n_disp)
@@ -681,33 +675,31 @@ def _row_costs(costs, colsum, window, best_left, segs, n_seg, r, n_disp, stride,
             for xx in range(_u64(x0 - r), _u64(x0 + r + 1)):
                 for k in range(_u64(lo), _u64(hi)):
                     window[k] = window.dtype.type(window[k] + window.dtype.type(colsum[xx * nd + k]))
-        _costs_and_winners(costs, colsum, window, best_left, _u64(x0), _u64(x0 + 1), ur, nd, _u64(stride), _u64(k0),
-                           _u64(k1), top, False)  # fmt: skip
-        _costs_and_winners(costs, colsum, window, best_left, _u64(x0 + 1), _u64(x1), ur, nd, _u64(stride), _u64(k0),
-                           _u64(k1), top, True)  # fmt: skip
+        _running_costs(costs, colsum, window, _u64(x0), _u64(x0 + 1), ur, nd, _u64(stride), _u64(k0), _u64(k1), False)
+        _running_costs(costs, colsum, window, _u64(x0 + 1), _u64(x1), ur, nd, _u64(stride), _u64(k0), _u64(k1), True)
         p1, pk0, pk1 = x1, k0, k1
 
 
 @njit(**_NJ)
-def _winners(costs, best_left, key_left, near_left, best_right, j_right, segs, n_seg, off, n_disp, stride, jlane,
-             klane, scale):  # fmt: skip
+def _winners(costs, key_left, near_left, best_right, j_right, segs, n_seg, off, n_disp, stride, jlane, scale):
     """The winners of the row's cost segments (columns [x0, x1), lanes [k0, k1) each). Left: ``key_left[x]``, the
-    key of the smallest j whose cost is the column's best ``best_left[x]``. Right: the costs are offered to the
-    right pixels' running minima along the diagonals, ``best_right[x + off + k]`` (cost) and ``j_right`` (its
+    smallest key ``cost · scale + j`` over the segment's lanes (the best cost, and among equal costs the smallest
+    j; the border columns' are taken again over the lanes that fit, after this pass). Right: the costs are offered
+    to the right pixels' running minima along the diagonals, ``best_right[x + off + k]`` (cost) and ``j_right`` (its
     disparity index; among equal costs the smallest). Columns are visited _PHASES apart (see above), so ties
-    are broken explicitly. ``jlane[k]``: lane k's disparity index, ``klane[k] = k + 1``. ``near_left`` (2, W):
-    the left winner's neighbouring costs, at j − 1 and j + 1 (for the sub-pixel refinement). (``best_left`` and
-    ``klane`` are no longer read: the key's minimum carries the best cost.)"""
+    are broken explicitly. ``jlane[k]``: lane k's disparity index. ``near_left`` (2, W): the left winner's
+    neighbouring costs, at j − 1 and j + 1 (for the sub-pixel refinement; read for the columns whose left tests
+    run, never for the border columns)."""
     for s in range(n_seg):
         x0, x1, k0, k1 = _u64(segs[s, 0]), _u64(segs[s, 1]), _u64(segs[s, 2]), _u64(segs[s, 3])
         for phase in range(_u64(_PHASES)):
             for x in range(x0 + phase, x1, _u64(_PHASES)):
                 cb = x * stride
                 rb = x + off
-                # the left winner's key, cost · scale + j (the smallest j among equal costs), as an int32 minimum: in
-                # 32-bit lanes LLVM vectorizes it; the search for the last lane holding best_left[x] it kept in
-                # 64-bit lanes (6-9 ms a 640x480 frame). Then the right minima in a loop of their own: in one
-                # loop with the reduction, numba 0.68 vectorized neither (35 ms for this pass).
+                # the left winner's key as an int32 minimum, which LLVM vectorizes (a search for the last lane
+                # holding the column's best cost it kept in 64-bit lanes: 6-9 ms a 640x480 frame); then the right
+                # minima in a loop of their own (in one loop with the left reduction, numba 0.68 vectorized
+                # neither: 35 ms for this pass)
                 key = np.int32(2**31 - 1)
                 for k in range(k0, k1):
                     key = min(key, np.int32(np.int32(costs[cb + k]) * scale + np.int32(jlane[k])))
@@ -1045,9 +1037,7 @@ def _sad_kernel(  # pragma: no cover - numba
     costs = np.full(n_cols * stride, top, probe.dtype)
     window = np.zeros(n_disp, probe.dtype)
     key_left = np.empty(n_cols, np.int32)
-    best_left = np.full(n_cols, top, probe.dtype)
     near_left = np.zeros((2, n_cols), probe.dtype)
-    klane = np.arange(1, n_disp + 1).astype(probe.dtype)
     best_right = np.full(n_padded, top, probe.dtype)
     j_right = np.zeros(n_padded, probe.dtype)
     second_left = np.full(n_cols, top, probe.dtype)
@@ -1118,38 +1108,29 @@ def _sad_kernel(  # pragma: no cover - numba
             _texture_columns(tsum_left, asat_left, y, r, n_cols, last == y - 1)
             _texture_columns(tsum_right, asat_right, y, r, n_cols, last == y - 1)
         last = y
-        _row_costs(costs, colsum, window, best_left, segs, n_seg, r, n_disp, stride, top)
+        _row_costs(costs, colsum, window, segs, n_seg, r, n_disp, stride)
         if volume.shape[0]:
             for x in range(r, n_cols - r):
                 for k in range(n_disp):
                     volume[y, x, n_disp - 1 - k] = costs[x * stride + k]
-        # left columns on the left border whose winner is needed: the best cost over the lanes that fit, the last
-        # ones (the winner's index, the smallest j with that cost, is then among them)
-        for x in range(r, min(lo_left, n_cols - r)):
-            if full[x]:
-                k0 = _u64(max(0, r - (x - max_disp)))
-                cb = _u64(x * stride)
-                best = top
-                for k in range(k0, nd):
-                    best = min(best, costs[cb + k])
-                best_left[x] = best
         # the winners of both images and, for the uniqueness test, their second-best costs
         i0, i1 = n_padded, 0
         for s in range(n_seg):
             i0, i1 = min(i0, segs[s, 0] + off + segs[s, 2]), max(i1, segs[s, 1] + off + segs[s, 3] - 1)
         best_right[i0:i1] = top
         second_right[i0:i1] = top
-        _winners(costs, best_left, key_left, near_left, best_right, j_right, segs, n_seg, _u64(off), nd, _u64(stride),
-                 jlane, klane, scale)  # fmt: skip
-        # left columns whose winner is needed but not every lane fits, on the right border (negative disparities
-        # only: there the lanes that fit are the first ones) or with none that fits: the key over those that fit
+        _winners(costs, key_left, near_left, best_right, j_right, segs, n_seg, _u64(off), nd, _u64(stride), jlane,
+                 scale)  # fmt: skip
+        # left columns whose winner is needed but not every lane fits (the lanes whose right window leaves the
+        # image read the padding): the key over the lanes that fit, the last ones on the left border, the first ones
+        # on the right border (negative disparities only), none (an invalid key) when no lane fits
         for xa, xb in ((r, min(lo_left, n_cols - r)), (max(hi_left + 1, lo_left, r), n_cols - r)):
             for x in range(xa, xb):
                 if full[x]:
                     k0, k1 = max(0, r - (x - max_disp)), min(n_disp, n_cols - r - (x - max_disp))
                     if k0 >= k1:
                         key_left[x] = big
-                    elif x > hi_left:
+                    else:
                         key_left[x] = _best_in(costs, _u64(x * stride), _u64(k0), _u64(k1), scale, jvec)
         if track:
             n_rneed = _right_needs(rrun, min_disp, max_disp, rneed)

@@ -279,6 +279,42 @@ def test_a_landmark_whose_line_a_frame_finds_off_its_wall_is_dropped():
     assert keep == [(a, 0), (b, 1)] and dropped == []
 
 
+def test_an_associated_line_off_its_fitted_wall_is_not_used_where_the_wall_has_no_model():
+    """A frame that sees a wall but none of its free edges models no features on it, so the re-check of the
+    associated landmarks has no candidate to compare with: the pair is tested against the wall as fitted in the
+    frame. A line on the wall is used; a line on the same left ray 1.5 m nearer (the front edge of something
+    standing in front of the wall; at 5 m the default camera's test, σ_img 0.5 px, resolves about 0.9 m) is not,
+    and the landmark stays in the filter. Without the camera the former rule holds
+    (kept)."""
+    from types import SimpleNamespace
+
+    from stablemarks.estimation import JointEKF, NewLandmark
+    from stablemarks.geometry import StereoCamera
+    from stablemarks.methods import METHODS
+    from stablemarks.planes import PlaneFit
+
+    wall = ReferencePlane("w", (-1.5, 5.0), (1.5, 5.0), free_edges=("p1",))
+    camera = StereoCamera()
+    X = np.array([0.0, 0.0, np.pi / 2])
+    ekf = JointEKF(camera, X, np.diag([1e-4, 1e-4, 1e-6]))
+    (a,) = ekf.add_landmarks([NewLandmark.wall(wall, 1.0)], 1e-4 * np.eye(1))
+    on_wall = np.array([-0.5, 5.0])
+    nearer = np.array([-0.5 * 3.5 / 5.0, 3.5])  # the same left ray, 1.5 m nearer
+    uv = np.array([camera.project_columns(X, p) for p in (on_wall, nearer)])
+    assert abs(uv[0, 0] - uv[1, 0]) < 1e-9 and uv[1, 0] - uv[1, 1] > uv[0, 0] - uv[0, 1] + 1.0
+    fit = SimpleNamespace(plane=wall, a=0.0, b=0.0, s0=1.5, cov_R=np.diag([1e-6, 1e-6]))
+    fit.constraint = lambda P: PlaneFit.constraint(fit, P)
+    pairs = SimpleNamespace(u_left=uv[:, 0], u_right=uv[:, 1])
+    model = SimpleNamespace(candidates=[], planes=[SimpleNamespace(fit=fit, gated="")], X=X,
+                            front=SimpleNamespace(kept_pairs=pairs))
+    method = METHODS["stablemarks"]()
+    assert method.recheck(ekf, model, [(a, 0)], 3.0, camera, 3.0) == ([(a, 0)], [])
+    assert method.recheck(ekf, model, [(a, 1)], 3.0, camera, 3.0) == ([], [])
+    assert method.recheck(ekf, model, [(a, 1)], 3.0) == ([(a, 1)], [])  # no camera: not tested
+    model.planes[0].gated = "shifted"  # a wall the map contradicts is not a reference for the test
+    assert method.recheck(ekf, model, [(a, 1)], 3.0, camera, 3.0) == ([(a, 1)], [])
+
+
 def test_an_edge_nearer_than_block_matching_searches_is_not_searched():
     """A panel's free end 0.85 m in front of the lab's camera (f·b = 60 px·m: 70 px of disparity) lies beyond the 64
     disparities searched: its region would end where the panel leaves the range, not at its end, so the end is not

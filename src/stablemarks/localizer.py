@@ -827,7 +827,8 @@ class Localizer:
                 record.inflation, _ = self._widen_to_fit(max(report["incompatible"], key=len), front, pan)
                 assoc = method.associate(self.ekf, front, model, pan, cam_k, max_incidence=self._max_incidence)
             recovering = record.inflation != 1.0 or reinitialised  # the pose moved beyond the prediction's gates
-            assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma)
+            assoc, dropped = method.recheck(self.ekf, model, assoc, self.config.ekf.recheck_sigma, cam_k,
+                                            self.config.landmarks.off_wall_sigma)
             dropped += self._missed_landmarks(model, assoc, pan, dropped)
             for i in dropped:
                 self.retired[i] = self.ekf.landmark(i)

@@ -72,22 +72,38 @@ class Method:
         return model.selected
 
     def recheck(self, ekf: JointEKF, model: FrameLandmarks | None, assoc: list[tuple[int, int]],
-                sigma: float) -> tuple[list[tuple[int, int]], list[int]]:
+                sigma: float, camera: StereoCamera | None = None, off_wall_sigma: float | None = None
+                ) -> tuple[list[tuple[int, int]], list[int]]:
         """Re-check each associated wall landmark against the frame's own model of the same line: positions
         along the wall (both pose-independent) must agree within ``sigma`` σ of their two variances. A landmark
         that does not is dropped from the filter (and the pair enters again as a new landmark from this frame's
         model): an error made from far away or at a slant is corrected when the line is seen better. So is a
         landmark whose line this frame finds off its wall (:data:`~stablemarks.landmarks.REASON_OFF_WALL`): an
         edge of something standing in front of the wall, let in by a frame whose test it passed by chance, is
-        tested again in every frame that sees it. Returns the associations kept and the ids dropped."""
+        tested again in every frame that sees it.
+
+        A pair the model did not place on the wall (its features not modelled in this frame, no free edge in
+        view; or the pair not one of the wall's members) is tested against the wall as fitted in this frame, when
+        ``camera`` (the frame's, panned) and ``off_wall_sigma`` are given: its triangulated point must lie on the
+        fitted line within ``off_wall_sigma`` σ (Eq 12's innovation, as at entry; the pose cancels, both being
+        placed from the same mean pose). One that does not is not associated in this frame, the landmark kept: the
+        line may be another one in the gate (storeroom: after a blind turn, a landmark entered at the junction of a
+        cabinet with its wall was associated with the cabinet's front edge, 0.4 m nearer, and pulled the pose
+        0.16 m off). Returns the associations kept and the ids dropped."""
         if model is None:
             return assoc, []
         by_pair = {c.pair: c for c in model.candidates}
+        fits = {}
+        if camera is not None and off_wall_sigma is not None:
+            fits = {pm.fit.plane.id: pm.fit for pm in getattr(model, "planes", []) if not pm.gated}
         keep, dropped = [], []
         for i, j in assoc:
             c = by_pair.get(j)
             if c is None:  # a point landmark, or a pair the model did not place on a wall
-                keep.append((i, j))
+                lm = ekf.landmark(i)
+                fit = fits.get(lm.plane_id) if lm.kind == "wall" else None
+                if fit is None or _on_fitted_wall(camera, fit, model.X, model.front.kept_pairs, j, off_wall_sigma):
+                    keep.append((i, j))
                 continue
             lm = ekf.landmark(i)
             if lm.kind != "wall" or lm.plane_id != c.plane_id:
@@ -222,3 +238,15 @@ def enter_point_landmarks(ekf: JointEKF, camera: StereoCamera, pairs, idx, frame
     for i, cz in enumerate(cov_z):
         C[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] += cz
     return ekf.add_landmarks(new, C, cov_pose_new=ekf.cov_pose @ G.T, frame=frame)
+
+
+def _on_fitted_wall(camera: StereoCamera, fit, X, pairs, j: int, k: float) -> bool:
+    """Whether segment pair ``j``'s line, triangulated from the mean pose ``X``, lies on the wall ``fit`` within
+    ``k`` σ: Eq 12's innovation ``G`` against its variance from the line's columns (``camera.sigma_img``) and the
+    fitted line's covariance (the entry's off-wall test, :func:`~stablemarks.landmarks.model_features`)."""
+    P, cov = camera.triangulate(float(pairs.u_left[j]), float(pairs.u_right[j]), X)
+    if not np.all(np.isfinite(P)):
+        return False
+    G, J_G_P, J_G_R = fit.constraint(P)
+    var = float(J_G_P @ cov @ J_G_P + J_G_R @ fit.cov_R @ J_G_R)
+    return bool(abs(float(G)) <= k * np.sqrt(var))

@@ -311,8 +311,11 @@ def test_an_associated_line_off_its_fitted_wall_is_not_used_where_the_wall_has_n
     assert method.recheck(ekf, model, [(a, 0)], 3.0, camera, 3.0) == ([(a, 0)], [])
     assert method.recheck(ekf, model, [(a, 1)], 3.0, camera, 3.0) == ([], [])
     assert method.recheck(ekf, model, [(a, 1)], 3.0) == ([(a, 1)], [])  # no camera: not tested
-    model.planes[0].gated = "shifted"  # a wall the map contradicts is not a reference for the test
-    assert method.recheck(ekf, model, [(a, 1)], 3.0, camera, 3.0) == ([(a, 1)], [])
+    # a fit the map gates as shifted (the pose is off after a blind stretch) is still the wall as the frame sees
+    # it: line and fit are placed from the same pose, so the test holds whatever the pose error
+    model.planes[0].gated = "shifted"
+    assert method.recheck(ekf, model, [(a, 1)], 3.0, camera, 3.0) == ([], [])
+    assert method.recheck(ekf, model, [(a, 0)], 3.0, camera, 3.0) == ([(a, 0)], [])
 
 
 def test_an_edge_nearer_than_block_matching_searches_is_not_searched():

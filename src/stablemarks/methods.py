@@ -89,13 +89,15 @@ class Method:
         placed from the same mean pose). One that does not is not associated in this frame, the landmark kept: the
         line may be another one in the gate (storeroom: after a blind turn, a landmark entered at the junction of a
         cabinet with its wall was associated with the cabinet's front edge, 0.4 m nearer, and pulled the pose
-        0.16 m off). Returns the associations kept and the ids dropped."""
+        0.16 m off). A fit the map gates (shifted or turned from it) counts too: after a blind stretch the pose,
+        not the fit, is usually what is off, and the test does not depend on the pose. Returns the associations
+        kept and the ids dropped."""
         if model is None:
             return assoc, []
         by_pair = {c.pair: c for c in model.candidates}
         fits = {}
         if camera is not None and off_wall_sigma is not None:
-            fits = {pm.fit.plane.id: pm.fit for pm in getattr(model, "planes", []) if not pm.gated}
+            fits = {pm.fit.plane.id: pm.fit for pm in getattr(model, "planes", [])}
         keep, dropped = [], []
         for i, j in assoc:
             c = by_pair.get(j)

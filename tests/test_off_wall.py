@@ -304,6 +304,7 @@ def test_an_associated_line_off_its_fitted_wall_is_not_used_where_the_wall_has_n
     assert abs(uv[0, 0] - uv[1, 0]) < 1e-9 and uv[1, 0] - uv[1, 1] > uv[0, 0] - uv[0, 1] + 1.0
     fit = SimpleNamespace(plane=wall, a=0.0, b=0.0, s0=1.5, cov_R=np.diag([1e-6, 1e-6]))
     fit.constraint = lambda P: PlaneFit.constraint(fit, P)
+    fit.innovation = lambda P, cov: PlaneFit.innovation(fit, P, cov)
     pairs = SimpleNamespace(u_left=uv[:, 0], u_right=uv[:, 1])
     model = SimpleNamespace(candidates=[], planes=[SimpleNamespace(fit=fit, gated="")], X=X,
                             front=SimpleNamespace(kept_pairs=pairs))

@@ -34,7 +34,7 @@ def test_winners_pass_is_vectorized():
     costs = np.zeros(n_cols * stride, np.uint16)
     fn(costs, np.zeros(n_cols, np.int32), np.zeros((2, n_cols), np.uint16), np.zeros(2 * n_cols, np.uint16),
        np.zeros(2 * n_cols, np.uint16), np.array([[1, 2, 0, n_disp]], np.int64), 1, u64(0), u64(n_disp), u64(stride),
-       np.arange(n_disp, dtype=np.uint16), np.int32(64))  # fmt: skip
+       np.arange(n_disp, dtype=np.uint16), np.arange(n_disp, dtype=np.int32), np.int32(64))  # fmt: skip
     lines = fn.inspect_asm(fn.signatures[0]).splitlines()
     for op, what in (("vpminuw", "the right pixels' running minima"), ("vpminsd", "the left winners' keys")):
         assert any(op in line and "%ymm" in line for line in lines), f"{what} no longer compile to 256-bit vectors"

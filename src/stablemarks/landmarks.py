@@ -789,10 +789,7 @@ def model_features(
     if not ok.any():
         return []
     k, P_f, cov_f = k[ok], P_f[ok], cov_f[ok]
-    # Eq 12's innovation before the fusion: is the line on the fitted wall at all?
-    G, J_G_P, J_G_R = fit.constraint(P_f)
-    var_G_fit = np.einsum("ki,ij,kj->k", J_G_R, fit.cov_R, J_G_R)
-    var_G = np.einsum("i,kij,j->k", J_G_P, cov_f, J_G_P) + var_G_fit
+    G, var_G, var_G_fit = fit.innovation(P_f, cov_f)  # is the line on the fitted wall at all?
     P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
     d_p = (P_hat - boundary.P) @ t
     sigma_f = np.sqrt(np.einsum("i,kij,j->k", t, cov_hat, t))

@@ -95,19 +95,17 @@ class Method:
         if model is None:
             return assoc, []
         by_pair = {c.pair: c for c in model.candidates}
-        fits = {}
-        if camera is not None and off_wall_sigma is not None:
-            fits = {pm.fit.plane.id: pm.fit for pm in getattr(model, "planes", [])}
+        test = camera is not None and off_wall_sigma is not None
+        fits = {pm.fit.plane.id: pm.fit for pm in model.planes} if test else {}
         keep, dropped = [], []
         for i, j in assoc:
             c = by_pair.get(j)
+            lm = ekf.landmark(i)
             if c is None:  # a point landmark, or a pair the model did not place on a wall
-                lm = ekf.landmark(i)
                 fit = fits.get(lm.plane_id) if lm.kind == "wall" else None
                 if fit is None or _on_fitted_wall(camera, fit, model.X, model.front.kept_pairs, j, off_wall_sigma):
                     keep.append((i, j))
                 continue
-            lm = ekf.landmark(i)
             if lm.kind != "wall" or lm.plane_id != c.plane_id:
                 keep.append((i, j))
                 continue
@@ -244,11 +242,10 @@ def enter_point_landmarks(ekf: JointEKF, camera: StereoCamera, pairs, idx, frame
 
 def _on_fitted_wall(camera: StereoCamera, fit, X, pairs, j: int, k: float) -> bool:
     """Whether segment pair ``j``'s line, triangulated from the mean pose ``X``, lies on the wall ``fit`` within
-    ``k`` σ: Eq 12's innovation ``G`` against its variance from the line's columns (``camera.sigma_img``) and the
-    fitted line's covariance (the entry's off-wall test, :func:`~stablemarks.landmarks.model_features`)."""
-    P, cov = camera.triangulate(float(pairs.u_left[j]), float(pairs.u_right[j]), X)
+    ``k`` σ: Eq 12's innovation against its variance from the line's columns (``camera.sigma_img``) and the fitted
+    line's covariance (:meth:`~stablemarks.planes.PlaneFit.innovation`, as the entry's off-wall test)."""
+    P, cov = camera.triangulate(pairs.u_left[j : j + 1], pairs.u_right[j : j + 1], X)
     if not np.all(np.isfinite(P)):
         return False
-    G, J_G_P, J_G_R = fit.constraint(P)
-    var = float(J_G_P @ cov @ J_G_P + J_G_R @ fit.cov_R @ J_G_R)
-    return bool(abs(float(G)) <= k * np.sqrt(var))
+    G, var_G, _ = fit.innovation(P, cov)
+    return bool(abs(float(G[0])) <= k * np.sqrt(float(var_G[0])))

@@ -439,6 +439,15 @@ class PlaneFit:
         J_G_R = np.stack([np.full_like(ds, -1.0), -ds], axis=-1)
         return G, J_G_P, J_G_R
 
+    def innovation(self, P, cov_P) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Eq 12's innovation for triangulated points ``P`` (k, 2) with covariances ``cov_P`` (k, 2, 2), before
+        any fusion: is each on the fitted wall at all? Returns ``G`` (k,) [m], its variance ``var_G`` (k,) from the
+        point and the fitted line, and the line's share ``var_G_fit`` (k,) [m²] (the off-wall test of a line)."""
+        G, J_G_P, J_G_R = self.constraint(P)
+        var_G_fit = np.einsum("ki,ij,kj->k", J_G_R, self.cov_R, J_G_R)
+        var_G = np.einsum("i,kij,j->k", J_G_P, cov_P, J_G_P) + var_G_fit
+        return G, var_G, var_G_fit
+
     def fuse_point(self, P, cov_P, b: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Combine triangulated points with the fitted plane by one Kalman update each (Eqs 12–14).
 

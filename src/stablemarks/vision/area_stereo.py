@@ -681,10 +681,11 @@ def _row_costs(costs, colsum, window, segs, n_seg, r, n_disp, stride):
 
 
 @njit(**_NJ)
-def _winners(costs, key_left, near_left, best_right, j_right, segs, n_seg, off, n_disp, stride, jlane, scale):
+def _winners(costs, key_left, near_left, best_right, j_right, segs, n_seg, off, n_disp, stride, jlane, jvec, scale):
     """The winners of the row's cost segments (columns [x0, x1), lanes [k0, k1) each). Left: ``key_left[x]``, the
-    smallest key ``cost · scale + j`` over the segment's lanes (the best cost, and among equal costs the smallest
-    j; the border columns' are taken again over the lanes that fit, after this pass). Right: the costs are offered
+    smallest key ``cost · scale + j`` over the segment's lanes (:func:`_best_in`, ``jvec[k]`` lane k's disparity
+    index as int32: the best cost, and among equal costs the smallest j; the border columns' are taken again over
+    the lanes that fit, after this pass). Right: the costs are offered
     to the right pixels' running minima along the diagonals, ``best_right[x + off + k]`` (cost) and ``j_right`` (its
     disparity index; among equal costs the smallest). Columns are visited _PHASES apart (see above), so ties
     are broken explicitly. ``jlane[k]``: lane k's disparity index. ``near_left`` (2, W): the left winner's
@@ -700,9 +701,7 @@ def _winners(costs, key_left, near_left, best_right, j_right, segs, n_seg, off, 
                 # holding the column's best cost it kept in 64-bit lanes: 6-9 ms a 640x480 frame); then the right
                 # minima in a loop of their own (in one loop with the left reduction, numba 0.68 vectorized
                 # neither: 35 ms for this pass)
-                key = np.int32(2**31 - 1)
-                for k in range(k0, k1):
-                    key = min(key, np.int32(np.int32(costs[cb + k]) * scale + np.int32(jlane[k])))
+                key = _best_in(costs, cb, k0, k1, scale, jvec)
                 kk = costs.dtype.type(n_disp - _u64(key & (scale - np.int32(1))))  # 1 + the winner's lane
                 for k in range(k0, k1):
                     c = costs[cb + k]
@@ -1120,7 +1119,7 @@ def _sad_kernel(  # pragma: no cover - numba
         best_right[i0:i1] = top
         second_right[i0:i1] = top
         _winners(costs, key_left, near_left, best_right, j_right, segs, n_seg, _u64(off), nd, _u64(stride), jlane,
-                 scale)  # fmt: skip
+                 jvec, scale)  # fmt: skip
         # left columns whose winner is needed but not every lane fits (the lanes whose right window leaves the
         # image read the padding): the key over the lanes that fit, the last ones on the left border, the first ones
         # on the right border (negative disparities only), none (an invalid key) when no lane fits

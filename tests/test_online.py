@@ -157,7 +157,7 @@ def test_records_replay_the_filter(lab_short, lab_short_edges, lab_scenario, edg
             ekf.inflate_pose(rec.inflation, position_only=True)
         if rec.measurements:
             ekf.update([(i, (ul, ur)) for i, ul, ur in rec.measurements], rec.pan, frame=rec.index,
-                       iterations=1 if rec.inflation == 1.0 else 5)
+                       iterations=Config().ekf.iterations)
         for ids, values, cov in rec.landmark_priors:
             new = []
             for i, s in zip(ids, values, strict=True):

@@ -85,7 +85,7 @@ def _pipeline(left, right, camera, world_map, X, cov_X, config, ekf, regions: bo
         pairs = front.kept_pairs
         measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
         chosen = e.select_for_update(e.associate_joint(measured, 0.0))
-        e.update([(i, measured[j]) for i, j in chosen])
+        e.update([(i, measured[j]) for i, j in chosen], iterations=config.ekf.iterations)
     t3 = time.perf_counter()
     m = model.timings
     return {"regions": t1 - t0, "segments": front.timings["segments"], "matching": front.timings["matching"],

@@ -888,7 +888,7 @@ class Localizer:
                 pairs = front.kept_pairs
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
                 res = self.ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k,
-                                      iterations=1 if not recovering else 5)
+                                      iterations=self.config.ekf.iterations)
                 record.measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen]
                 record.observed = [int(i) for i in res.ids]
                 record.nis = [float(v) for v in res.nis]

@@ -1169,8 +1169,9 @@ class JointEKF:
         observations : ``[(landmark id, (u_l, u_r)), …]`` [px], each landmark at most once.
         pan : the frame's pan angle [rad].
         frame : frame index recorded as the landmarks' last observation.
-        iterations : most Gauss–Newton iterations of the iterated EKF (1: the ordinary EKF update); they stop
-            when a step moves no observed state component by 1 % of its posterior σ. The localizer uses
+        iterations : most Gauss–Newton iterations of the iterated EKF (1: the ordinary EKF update), each step
+            taken only as far as it does not raise the update's MAP cost (:meth:`_map_cost`, :func:`_backtrack`);
+            they stop when a step moves no observed state component by 1 % of its posterior σ. The localizer uses
             ``ekf.iterations`` (:class:`EKFConfig`): after a blind stretch, a turn or a slip the predicted pose is
             far from the one the images imply, and one linearisation there returns a covariance smaller than the
             error.

@@ -573,10 +573,11 @@ def _covariance(a, n: int, where: str) -> np.ndarray:
 
 # --------------------------------------------------------------------- filter
 def _backtrack(cost, x_from: np.ndarray, x_to: np.ndarray, c_from: float, halvings: int = 5
-               ) -> tuple[np.ndarray, float] | None:
+               ) -> tuple[np.ndarray, float, tuple] | None:
     """The point on the step ``x_from → x_to`` (heading wrapped) whose ``cost`` does not exceed ``c_from``,
-    trying the whole step and then halves of it, with its cost; None if none does. Differences within 1e-9 of
-    the cost (its round-off near the minimum) count as no increase, so that the result does not depend on them."""
+    trying the whole step and then halves of it, with its cost and projection (``cost(x)`` returns both); None if
+    none does. Differences within 1e-9 of the cost (its round-off near the minimum) count as no increase, so that
+    the result does not depend on them."""
     step = x_to - x_from
     step[2] = wrap_angle(step[2])
     slack = 1e-9 * max(1.0, abs(c_from))
@@ -584,9 +585,9 @@ def _backtrack(cost, x_from: np.ndarray, x_to: np.ndarray, c_from: float, halvin
     for _ in range(halvings + 1):
         x = x_from + t * step
         x[2] = wrap_angle(x[2])
-        c = cost(x)
+        c, projection = cost(x)
         if c <= c_from + slack:
-            return x, c
+            return x, c, projection
         t *= 0.5
     return None
 
@@ -1139,7 +1140,8 @@ class JointEKF:
     def _map_cost(self, rows: np.ndarray, idx: np.ndarray, z: np.ndarray, x0: np.ndarray, camera: StereoCamera):
         """The cost an iterated update lowers, as a function of the state: the prior's Mahalanobis distance
         over the observed part of the state plus the columns' squared residuals over σ_img²; None where that
-        part of the covariance is singular (a Cholesky factorisation fails)."""
+        part of the covariance is singular (a Cholesky factorisation fails). ``cost(x)`` returns the cost and
+        :meth:`_project`'s result at ``x``, which the next linearisation there takes instead of projecting again."""
         idx_u = np.unique(idx)
         P_u = self._P[np.ix_(idx_u, idx_u)]
         try:
@@ -1149,14 +1151,15 @@ class JointEKF:
         info = np.linalg.inv(P_u)  # a few states: the inverse once, a product per evaluation
         var = self._var_img
 
-        def cost(x: np.ndarray) -> float:
-            uv = self._project(rows, x, camera)[0]
+        def cost(x: np.ndarray) -> tuple[float, tuple]:
+            projection = self._project(rows, x, camera)
+            uv = projection[0]
             if not np.all(np.isfinite(uv)):
-                return np.inf
+                return np.inf, projection
             d = x[idx_u] - x0[idx_u]
             d[2] = wrap_angle(d[2])
             r = (z - uv).reshape(-1)
-            return float(d @ info @ d + r @ r / var)
+            return float(d @ info @ d + r @ r / var), projection
 
         return cost
 
@@ -1204,9 +1207,9 @@ class JointEKF:
         x_i = x0
         n_it = max(1, int(iterations))
         cost = self._map_cost(rows, idx, z, x0, camera) if n_it > 1 else None
-        c_i = np.inf
+        c_i, projection = np.inf, None  # the cost at x_i and the projection there, when the cost computed it
         for it in range(n_it):
-            uv, J_I_X, J_I_l = self._project(rows, x_i, camera)
+            uv, J_I_X, J_I_l = projection if projection is not None else self._project(rows, x_i, camera)
             if not np.all(np.isfinite(uv)):
                 bad = int(self._ids[rows[~np.all(np.isfinite(uv), axis=1)][0]])
                 raise GeometryError(f"landmark {bad} is behind the camera; it cannot update the filter")
@@ -1229,9 +1232,9 @@ class JointEKF:
                 found = _backtrack(cost, x_i, x_new, c_i)
                 if found is None:
                     break  # no descent: x_i stays, with the linearisation at it just made
-                x_new, c_new = found
+                x_new, c_new, projection = found
             elif cost is not None:
-                c_new = cost(x_new)
+                c_new, projection = cost(x_new)
             step = np.abs(x_new[idx] - x_i[idx])
             step[2] = abs(wrap_angle(x_new[2] - x_i[2]))
             x_i = x_new

@@ -5,6 +5,8 @@ then put the edge off the wall (the hall's screens at 10 m: 3–6 px off the pla
 0.1 m along the wall from the true edge).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 
@@ -266,3 +268,79 @@ def test_boundaries_of_two_walls_whose_distance_the_map_contradicts_are_neither_
         SimpleNamespace(P=partition.edge("p1"), cov=cov, edge="p1"),
         SimpleNamespace(P=partition.edge("p2") + 0.2, cov=cov, edge="p2")])
     assert boundaries_apart([one], config) == {}
+
+
+@pytest.fixture(scope="module")
+def office_partition_ends():
+    """The office's partition B in frames 28 and 34 of its run (the scenario's pans, the true pose): its end p1 is
+    an occluding edge of a plain panel, where block matching fails for a window either side."""
+    sc = load_scenario("office")
+    cfg = Config()
+    source = SimulatedSource(simulate_run(sc))
+    out = []
+    for k in (28, 34):
+        f = source.frame(k)
+        T = np.asarray(f.true_pose)
+        cam = sc.camera.with_pan(f.pan)
+        front = run_front_end(f.left, f.right, cfg)
+        model = select_landmarks(front, cam, sc.map, T, np.diag([0.02, 0.02, 0.01]) ** 2, cfg)
+        truth = {e.id: e for e in f.truth.edges}
+        out.append((k, front, model, truth, cam, cfg))
+    return out
+
+
+def test_an_end_whose_pair_the_disparity_check_dropped_is_found_on_its_line(office_partition_ends):
+    """The pair of the end's own lines is dropped by the disparity check for want of support, and the region's
+    border stops 7–13 px inside: the boundary used to be that border (σ 4–5 cm). The pair lies on the fitted wall,
+    so the boundary is moved onto it and found at the true edge."""
+    for k, front, model, truth, _, _ in office_partition_ends:
+        dropped = front.pairs.subset(~front.kept)
+        ends = [b for pm in model.planes for b in pm.boundaries if b.plane_id == "partition-b" and b.edge == "p1"]
+        assert len(ends) == 1, k
+        b = ends[0]
+        assert b.snapped, k
+        assert np.any((dropped.u_left == b.u[0]) & (dropped.u_right == b.u[1])), k
+        assert abs(b.u[0] - truth["partition-b-p1"].u_l) < 0.5, (k, b.u, truth["partition-b-p1"].u_l)
+
+
+@dataclass
+class _Pairs:
+    u_left: np.ndarray
+    u_right: np.ndarray
+    v_top: np.ndarray
+    v_bottom: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.u_left)
+
+
+def test_edge_lines_are_dropped_pairs_on_the_wall_with_something_farther_beyond(office_partition_ends):
+    """A dropped pair is a line to move a boundary onto only if it lies on the fitted wall — not the same left line
+    matched 3 px off in the right image (the wall some 0.3 m nearer or farther), nor a line whose rows miss the
+    wall's region — and the disparity beyond it, outward of the edge, is farther than the wall: looked at from
+    the other end (outward into the partition itself) the same line shows nothing farther."""
+    from stablemarks.landmarks import edge_lines, on_wall_pairs
+
+    k, front, model, truth, cam, cfg = office_partition_ends[0]
+    fit = next(pm.fit for pm in model.planes if pm.fit.plane.id == "partition-b")
+    dropped = front.pairs.subset(~front.kept)
+    at_end = np.abs(dropped.u_left - truth["partition-b-p1"].u_l) < 0.5
+    assert at_end.any()
+    on = on_wall_pairs(cam, fit, dropped, cfg.landmarks)
+    assert on[at_end].all() and not on.all()
+    j = int(np.flatnonzero(at_end)[0])
+
+    def one(shift=0.0, rows=None):
+        top, bottom = (dropped.v_top[j], dropped.v_bottom[j]) if rows is None else rows
+        return _Pairs(dropped.u_left[j:j + 1], dropped.u_right[j:j + 1] + shift, np.array([top], float),
+                      np.array([bottom], float))
+
+    for shift, expect in ((0.0, True), (3.0, False), (-3.0, False)):
+        assert on_wall_pairs(cam, fit, one(shift), cfg.landmarks)[0] == expect, shift
+    r0, r1, _ = fit.box[0].indices(fit.region.shape[0])
+    rows = (r0 - 12.0, r0 - 2.0) if r0 >= 12 else (r1 + 2.0, r1 + 12.0)
+    assert not on_wall_pairs(cam, fit, one(rows=rows), cfg.landmarks)[0]
+    w = float(cfg.sad.block_size)
+    ends = dropped.subset(at_end)
+    assert len(edge_lines(cam, fit, "p1", ends, front.disparity.left, w)) >= 1
+    assert len(edge_lines(cam, fit, "p2", ends, front.disparity.left, w)) == 0

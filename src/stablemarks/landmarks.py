@@ -1187,6 +1187,7 @@ def landmarks_on_plane(
     unusable: dict[str, str] | None = None,
     memo: dict | None = None,
     boundaries_only: bool = False,
+    edge_pairs=None,
 ) -> PlaneLandmarks:
     """Members, boundary search at every free edge in the window, relative model and selection.
 
@@ -1209,6 +1210,9 @@ def landmarks_on_plane(
     features modelled from one boundary, each line's nearer-side test, the silhouettes) is taken from the earlier
     call instead of computed again (:func:`~stablemarks.pipeline.select_landmarks` models a wall again without
     boundaries :func:`boundaries_apart` flags: ~1 ms a wall). The result is the one computed afresh.
+    ``edge_pairs``: the frame's segment pairs that the disparity check did not keep; those on the fitted wall with
+    something farther beyond them (:func:`on_wall_pairs`, :func:`edge_lines`; needs ``disparity_left``) are lines a
+    boundary may be moved onto, never features.
     ``boundaries_only``: stop once the boundaries are found and checked, before any feature is modelled (no
     candidates): what :func:`boundaries_apart` reads, so that a wall is modelled once, from the boundaries that
     are usable in the frame (with ``memo``, the later full call does not search again).
@@ -1247,11 +1251,20 @@ def landmarks_on_plane(
         members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
         memo["members"] = members, idx, members_u
     members, idx, members_u = memo["members"]
+    if "edge_pairs" not in memo:
+        memo["edge_pairs"] = None if edge_pairs is None or disparity_left is None else \
+            edge_pairs.subset(on_wall_pairs(camera, fit, edge_pairs, config, *wall_columns(camera, fit,
+                                                                                         config.search_sigma)))
     boundaries, rejected, searched, hidden = [], [], [], []
     w_sad = boundary_window(config, window_px)
     for edge in fit.plane.free_edges:
         if ("edge", edge) not in memo:
-            memo[("edge", edge)] = _edge_search(camera, fit, edge, disparity_right, members_u, config, plane_config,
+            lines = members_u
+            if memo["edge_pairs"] is not None and len(memo["edge_pairs"]) and \
+                    np.all(np.isfinite(fit.prediction.edges[edge].u)):
+                lines = np.concatenate([members_u, edge_lines(camera, fit, edge, memo["edge_pairs"], disparity_left,
+                                                              window_px)])
+            memo[("edge", edge)] = _edge_search(camera, fit, edge, disparity_right, lines, config, plane_config,
                                                 window_px, valid_columns, world_map, border_sigma_px,
                                                 disparity_range, w_sad)
         found, rejected_before = memo[("edge", edge)]  # None: not searched; False: searched, not found
@@ -1354,6 +1367,80 @@ def landmarks_on_plane(
                  if c.selected and _at_silhouette(camera, c, sil, config.boundary_sigma) else c
                  for c in cands]
     return PlaneLandmarks(fit, boundaries, members, cands, rejected, searched, hidden=hidden)
+
+
+def on_wall_pairs(camera: StereoCamera, fit: PlaneFit, pairs, config: LandmarkConfig = LandmarkConfig(),
+                  lo: float = -np.inf, hi: float = np.inf) -> np.ndarray:
+    """(n,) bool: which segment ``pairs`` lie on the fitted wall — triangulated, within ``off_wall_sigma`` σ of it
+    (Eq 12's innovation, the candidates' off-wall test), at least half their rows among the fitted region's rows,
+    and their left column within ``[lo, hi]`` (:func:`wall_columns`). A pair matched to the wrong line, pixels off
+    in disparity, is off the wall."""
+    n = len(pairs)
+    out = np.zeros(n, dtype=bool)
+    if n == 0:
+        return out
+    ul, ur = np.asarray(pairs.u_left, dtype=float), np.asarray(pairs.u_right, dtype=float)
+    r0, r1, _ = fit.box[0].indices(fit.region.shape[0])
+    top, bottom = np.asarray(pairs.v_top, dtype=float), np.asarray(pairs.v_bottom, dtype=float)
+    overlap = np.minimum(bottom, r1 - 1) - np.maximum(top, r0)
+    k = np.flatnonzero((ul >= lo) & (ul <= hi) & (overlap >= 0.5 * (bottom - top)))
+    if len(k) == 0:
+        return out
+    P, cov = camera.triangulate(ul[k], ur[k], fit.X)
+    ok = np.all(np.isfinite(P), axis=-1)
+    k, P, cov = k[ok], P[ok], cov[ok]
+    if len(k):
+        G, var_G, _ = fit.innovation(P, cov)
+        out[k[np.abs(G) <= config.off_wall_sigma * np.sqrt(var_G)]] = True
+    return out
+
+
+def edge_lines(camera: StereoCamera, fit: PlaneFit, edge: str, pairs, disparity_left: np.ndarray,
+               window_px: float, min_step_px: float = 1.0) -> np.ndarray:
+    """Columns ``(u_left, u_right)`` (k, 2) of segment pairs the disparity check dropped that may mark the free edge
+    ``edge`` of the fitted wall: lines a boundary may be moved onto (:func:`search_boundary`), never features.
+
+    A wall's occluding end is where block matching fails: the window straddles the depth step, and on a plain
+    surface (a whiteboard, a partition) no pixel near the end has texture enough to pass the left-right check, so
+    the pair of the end's own lines is dropped for want of support (Fig 6) while the region's border stops a window
+    or so inside. The boundary was then moved onto the last line the check kept, a feature inside the end (office,
+    a whiteboard 0.8 m in front of its wall: its end found on a drawn line 5 cm in, every landmark modelled from it
+    3–5 cm off). Such a pair is taken when it lies on the wall (``pairs``: :func:`on_wall_pairs`) and the disparity
+    image shows what a free edge has beyond it: something *farther* (the map's depth step). Outward of the line,
+    from half a window on and past the strip the step hides from the right camera, at least a third of its rows
+    must hold a disparity, and in most of those the first one met must lie more than ``min_step_px`` below the
+    pair's own. A line beside a hidden end (a door frame's strip just inside an end that a nearer wall hides,
+    whose pixels beyond are unmatched or nearer) shows nothing farther and is not taken.
+    """
+    none = np.zeros((0, 2))
+    if len(pairs) == 0:
+        return none
+    inner = float(_inner_columns(camera, fit.X, fit.plane, edge)[0])
+    e = fit.prediction.edges[edge]
+    outward = -1 if e.u[0] < inner else 1
+    H, W = disparity_left.shape
+    keep = []
+    columns = (np.asarray(a, dtype=float).tolist() for a in (pairs.u_left, pairs.u_right, pairs.v_top, pairs.v_bottom))
+    for ul, ur, vt, vb in zip(*columns, strict=True):
+        d = ul - ur
+        # beyond the half window the line's own matches spread over, and past the strip the step hides from the
+        # right camera (as wide as the step in disparity, at most the pair's own disparity)
+        offsets = np.arange(int(window_px // 2) + 1, int(window_px // 2) + 2 + int(np.ceil(d)) + int(window_px))
+        cols = np.rint(ul + outward * offsets).astype(int)
+        cols = cols[(cols >= 0) & (cols < W)]
+        rows = np.arange(max(0, int(np.ceil(vt))), min(H, int(np.floor(vb)) + 1))
+        if len(cols) == 0 or len(rows) < 5:
+            continue
+        block = disparity_left[np.ix_(rows, cols)]
+        valid = np.isfinite(block)
+        held = valid.any(axis=1)
+        if held.sum() < len(rows) / 3:
+            continue
+        # each row's first disparity outward of the line: the surface seen right beyond it
+        first = block[held, np.argmax(valid[held], axis=1)]
+        if np.sum(first < d - min_step_px) > 0.5 * held.sum():
+            keep.append((ul, ur))
+    return np.array(keep, dtype=float).reshape(-1, 2)
 
 
 def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right, members_u, config: LandmarkConfig,

@@ -763,6 +763,7 @@ def select_landmarks(
                       window_px=float(config.sad.block_size), valid_columns=columns, world_map=world_map, cov_X=cov_X,
                       border_sigma_px=(config.noise.boundary_px, config.noise.free_boundary_px),
                       disparity_left=front.disparity.left,
+                      edge_pairs=front.pairs.subset(~np.asarray(front.kept)) if preds else None,
                       disparity_range=(float(config.sad.min_disparity),
                                        float(config.sad.min_disparity + config.sad.num_disparities - 1)))
     for pred in preds:

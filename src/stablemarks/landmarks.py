@@ -1262,8 +1262,9 @@ def landmarks_on_plane(
             lines = members_u
             if memo["edge_pairs"] is not None and len(memo["edge_pairs"]) and \
                     np.all(np.isfinite(fit.prediction.edges[edge].u)):
+                box = fit.prediction.box(disparity_left.shape[0], plane_config.row_margin_px)
                 lines = np.concatenate([members_u, edge_lines(camera, fit, edge, memo["edge_pairs"], disparity_left,
-                                                              window_px)])
+                                                              window_px, box=box)])
             memo[("edge", edge)] = _edge_search(camera, fit, edge, disparity_right, lines, config, plane_config,
                                                 window_px, valid_columns, world_map, border_sigma_px,
                                                 disparity_range, w_sad)
@@ -1396,7 +1397,7 @@ def on_wall_pairs(camera: StereoCamera, fit: PlaneFit, pairs, config: LandmarkCo
 
 
 def edge_lines(camera: StereoCamera, fit: PlaneFit, edge: str, pairs, disparity_left: np.ndarray,
-               window_px: float, min_step_px: float = 1.0) -> np.ndarray:
+               window_px: float, min_step_px: float = 1.0, box: tuple[slice, slice] | None = None) -> np.ndarray:
     """Columns ``(u_left, u_right)`` (k, 2) of segment pairs the disparity check dropped that may mark the free edge
     ``edge`` of the fitted wall: lines a boundary may be moved onto (:func:`search_boundary`), never features.
 
@@ -1410,7 +1411,9 @@ def edge_lines(camera: StereoCamera, fit: PlaneFit, edge: str, pairs, disparity_
     from half a window on and past the strip the step hides from the right camera, at least a third of its rows
     must hold a disparity, and in most of those the first one met must lie more than ``min_step_px`` below the
     pair's own. A line beside a hidden end (a door frame's strip just inside an end that a nearer wall hides,
-    whose pixels beyond are unmatched or nearer) shows nothing farther and is not taken.
+    whose pixels beyond are unmatched or nearer) shows nothing farther and is not taken. ``box`` ``(rows, cols)``:
+    read only there (the plane's band box, :meth:`~stablemarks.planes.PlanePrediction.box`, which a front end that
+    computes disparity in regions always computes: the decision is then the same as with dense disparity).
     """
     none = np.zeros((0, 2))
     if len(pairs) == 0:
@@ -1419,6 +1422,10 @@ def edge_lines(camera: StereoCamera, fit: PlaneFit, edge: str, pairs, disparity_
     e = fit.prediction.edges[edge]
     outward = -1 if e.u[0] < inner else 1
     H, W = disparity_left.shape
+    (r_lo, r_hi), (c_lo, c_hi) = (0, H), (0, W)
+    if box is not None:
+        r_lo, r_hi, _ = box[0].indices(H)
+        c_lo, c_hi, _ = box[1].indices(W)
     keep = []
     columns = (np.asarray(a, dtype=float).tolist() for a in (pairs.u_left, pairs.u_right, pairs.v_top, pairs.v_bottom))
     for ul, ur, vt, vb in zip(*columns, strict=True):
@@ -1427,8 +1434,8 @@ def edge_lines(camera: StereoCamera, fit: PlaneFit, edge: str, pairs, disparity_
         # right camera (as wide as the step in disparity, at most the pair's own disparity)
         offsets = np.arange(int(window_px // 2) + 1, int(window_px // 2) + 2 + int(np.ceil(d)) + int(window_px))
         cols = np.rint(ul + outward * offsets).astype(int)
-        cols = cols[(cols >= 0) & (cols < W)]
-        rows = np.arange(max(0, int(np.ceil(vt))), min(H, int(np.floor(vb)) + 1))
+        cols = cols[(cols >= c_lo) & (cols < c_hi)]
+        rows = np.arange(max(r_lo, int(np.ceil(vt))), min(r_hi, int(np.floor(vb)) + 1))
         if len(cols) == 0 or len(rows) < 5:
             continue
         block = disparity_left[np.ix_(rows, cols)]

@@ -1250,11 +1250,10 @@ def landmarks_on_plane(
         idx = np.flatnonzero(members)
         members_u = np.stack([pairs.u_left[idx], pairs.u_right[idx]], axis=-1) if len(idx) else np.zeros((0, 2))
         memo["members"] = members, idx, members_u
-    members, idx, members_u = memo["members"]
-    if "edge_pairs" not in memo:
+        # the dropped pairs on the wall, between the same two ends' windows: lines an end may be moved onto
         memo["edge_pairs"] = None if edge_pairs is None or disparity_left is None else \
-            edge_pairs.subset(on_wall_pairs(camera, fit, edge_pairs, config, *wall_columns(camera, fit,
-                                                                                         config.search_sigma)))
+            edge_pairs.subset(on_wall_pairs(camera, fit, edge_pairs, config, lo, hi))
+    members, idx, members_u = memo["members"]
     boundaries, rejected, searched, hidden = [], [], [], []
     w_sad = boundary_window(config, window_px)
     for edge in fit.plane.free_edges:

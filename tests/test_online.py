@@ -38,6 +38,14 @@ def lab_short_edges(lab_scenario):
     return run, run_online(ShortSource(run, 11), config=config)
 
 
+@pytest.fixture(scope="module")
+def lab_short_walls(lab_scenario):
+    """The same run with the fitted walls updating the pose (``ekf.wall_updates``)."""
+    run = simulate_run(lab_scenario, seed=5)
+    config = Config().with_overrides({"ekf": {"wall_updates": True}, "planes": {"disparity_bias_px": 0.03}})
+    return run, run_online(ShortSource(run, 11), config=config)
+
+
 def test_lab_run_localizes_better_than_dead_reckoning(lab_short):
     run, result = lab_short
     T = result.true_poses
@@ -137,15 +145,17 @@ def test_se2_between_matches_odometry_increments(lab_scenario):
     assert_psd(lab_scenario.robot.odometry.covariance(U))
 
 
-@pytest.mark.parametrize("edges", [False, True])
-def test_records_replay_the_filter(lab_short, lab_short_edges, lab_scenario, edges):
-    """The records hold everything the filter used (odometry, priors of new landmarks, measurements, pans, and
-    with ``ekf.edge_updates`` the free edges found again): replaying them through a fresh filter gives the same
-    final state, so a smoother can use them too."""
+@pytest.mark.parametrize("extra", ["", "edges", "walls"])
+def test_records_replay_the_filter(lab_short, lab_short_edges, lab_short_walls, lab_scenario, extra):
+    """The records hold everything the filter used (odometry, priors of new landmarks, measurements, pans, with
+    ``ekf.edge_updates`` the free edges found again and with ``ekf.wall_updates`` the fitted walls): replaying
+    them through a fresh filter gives the same final state, so a smoother can use them too."""
     from stablemarks.estimation import JointEKF, NewLandmark
+    from stablemarks.localizer import apply_wall_measurements
 
-    run, result = lab_short_edges if edges else lab_short
-    assert any(r.edge_measurements for r in result.records) is edges
+    run, result = {"": lab_short, "edges": lab_short_edges, "walls": lab_short_walls}[extra]
+    assert any(r.edge_measurements for r in result.records) is (extra == "edges")
+    assert any(r.wall_measurements for r in result.records) is (extra == "walls")
 
     ekf = JointEKF(Config().camera(lab_scenario.camera), SimulatedSource(run).initial_pose, result.cov0)
     for rec in result.records:
@@ -170,9 +180,11 @@ def test_records_replay_the_filter(lab_short, lab_short_edges, lab_scenario, edg
                                     [(ul, ur) for _, _, ul, ur, _ in rec.edge_measurements],
                                     np.array([c for *_, c in rec.edge_measurements]), rec.pan,
                                     cov_points=np.stack([wm.edge_cov(p, e) for p, e, *_ in rec.edge_measurements]))
+        apply_wall_measurements(ekf, rec.wall_measurements)  # the fitted walls (ekf.wall_updates), after the edges
     assert sum(len(r.measurements) for r in result.records) > 20
     np.testing.assert_allclose(ekf.pose, result.ekf.pose, atol=1e-12)
     np.testing.assert_allclose(ekf.cov_pose, result.ekf.cov_pose, atol=1e-15)
+    np.testing.assert_allclose(ekf.cov, result.ekf.cov, atol=1e-15)
 
 
 def _untimed(log_path) -> list[dict]:

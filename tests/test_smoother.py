@@ -34,7 +34,7 @@ from stablemarks.metrics import ate_rmse  # noqa: E402
 from stablemarks.online import OnlineResult, run_online  # noqa: E402
 from stablemarks.sim.run import simulate_run  # noqa: E402
 from stablemarks.sim.source import SimulatedSource  # noqa: E402
-from stablemarks.smoother import batch_smooth, group_prior_factor, observation_factor  # noqa: E402
+from stablemarks.smoother import batch_smooth, group_prior_factor, observation_factor, wall_factor  # noqa: E402
 
 from .helpers import numerical_jacobian  # noqa: E402
 
@@ -82,6 +82,33 @@ def test_observation_factor_jacobians_match_central_differences(edge):
         np.testing.assert_allclose(b * sigma, -residual, rtol=1e-12)
         uv = camera.with_pan(pan).project_columns(pose, WALL.point_at(s, edge))
         np.testing.assert_allclose(residual, uv - z, rtol=1e-12)
+
+
+def test_wall_factor_jacobians_match_central_differences():
+    """The fitted wall's factor (``ekf.wall_updates``): residual ``H (X − X_lin) + J_β β − ν``, Jacobians w.r.t.
+    gtsam's tangent spaces against differences of its own residual."""
+    from gtsam.symbol_shorthand import B
+
+    rng = np.random.default_rng(2)
+    X_lin = np.array([0.1, -0.2, 1.3])
+    H = rng.normal(size=(2, 3))
+    J_b = rng.normal(size=2)
+    nu = rng.normal(size=2) * 1e-2
+    factor = wall_factor(X(0), B(0), nu, H, J_b, np.diag([1e-4, 4e-4]), X_lin)
+    pose = X_lin + np.array([0.01, -0.02, 0.03])
+
+    def values(delta):
+        v = gtsam.Values()
+        v.insert(X(0), gtsam.Pose2(*pose).retract(delta[:3]))
+        v.insert(B(0), np.array([0.02 + delta[3]]))
+        return v
+
+    residual = factor.unwhitenedError(values(np.zeros(4)))
+    np.testing.assert_allclose(residual, H @ (pose - X_lin) + J_b * 0.02 - nu, rtol=1e-12, atol=1e-15)
+    A, _ = factor.linearize(values(np.zeros(4))).jacobian()
+    numeric = numerical_jacobian(lambda d: factor.unwhitenedError(values(d)), np.zeros(4))
+    W = np.linalg.cholesky(np.linalg.inv(np.diag([1e-4, 4e-4]))).T  # gtsam whitens with R^(-1/2)
+    np.testing.assert_allclose(np.linalg.solve(W, A), numeric, rtol=1e-6, atol=1e-8)
 
 
 def test_group_prior_factor_is_the_joint_gaussian():
@@ -190,6 +217,22 @@ def test_smoothing_the_lab_run_beats_the_filter_and_dead_reckoning(lab_short):
         # batch uses every observation the filter used: no landmark less certain than in the filter
         assert 0.0 < lm.var_s <= result.ekf.landmark(i).cov[0, 0] * (1 + 1e-3)  # up to the linearisation points
     assert np.all(np.linalg.eigvalsh(out.cov_poses) > 0)
+
+
+def test_smoothing_a_run_with_wall_updates_uses_the_walls(lab_scenario):
+    """With ``ekf.wall_updates`` the records hold the fitted walls; the smoother takes them with one shared
+    disparity error per wall, as the filter does, and still beats the filter."""
+    config = Config().with_overrides({"ekf": {"wall_updates": True}, "planes": {"disparity_bias_px": 0.03}})
+    run = truncate_run(simulate_run(lab_scenario, seed=5), 8)
+    result = run_online(SimulatedSource(run), start_pose=start_belief(run, COV0), start_cov=COV0, config=config)
+    assert any(r.wall_measurements for r in result.records)
+    out = batch_smooth(result, lab_scenario.camera, config)
+    T = result.true_poses
+    assert ate_rmse(out.poses, T) <= ate_rmse(result.poses, T)
+    # without the walls' factors the smoother knows the pose less well
+    plain = replace(result, records=[replace(r, wall_measurements=[]) for r in result.records])
+    without = batch_smooth(plain, lab_scenario.camera, config)
+    assert np.mean(np.linalg.det(out.cov_poses)) < np.mean(np.linalg.det(without.cov_poses))
 
 
 # ---------------------------------------------------------------- failures

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+import scipy.linalg
 from scipy.special import chdtri
 from scipy.stats import binom
 
@@ -163,6 +164,11 @@ class FrameRecord:
     edge_measurements: list[tuple[str, str, float, float, list[list[float]]]] = field(default_factory=list)
     """Free edges found in this frame that updated the pose (``ekf.edge_updates``): ``(plane id, edge, u_l, u_r,
     covariance of (u_l, u_r) [px²])``; the map's accuracy is added to it."""
+    wall_measurements: list[tuple] = field(default_factory=list)
+    """Walls fitted in this frame that updated the pose (``ekf.wall_updates``, one joint update after the edges'):
+    ``(plane id, innovation ν of (a, b), H = ∂(a, b)/∂X, ∂(a, b)/∂β or None, noise covariance, σ_β², pose of the
+    update)``: ``ν ≈ H (X − X_update) + J_β β`` (``β`` the wall's shared disparity error, the filter's auxiliary
+    state ``"wall:<id>"``, entered with variance σ_β² when the wall is first used)."""
     candidates: list[dict] = field(default_factory=list)
     """Every feature the frame modelled, with its selection decision and, when rejected, the reason
     (:func:`model_log`): so that a rejection, e.g. the edge of an unmapped object in front of a wall ("off the
@@ -305,6 +311,32 @@ def landmark_map_document(ekf: JointEKF, method: str = "stablemarks") -> dict:
     doc.pop("pose", None)
     doc.pop("cov_pose", None)
     return doc
+
+
+def _wall_terms(measurements) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray, np.ndarray]:
+    """The stacked wall measurements (:attr:`FrameRecord.wall_measurements`): ``(nu (2m,), H (2m, 3), keys of the
+    walls' auxiliary states, H_aux (2m, len(keys)), R (2m, 2m))``."""
+    nu = np.array([v for m in measurements for v in m[1]], dtype=float)
+    H = np.array([row for m in measurements for row in m[2]], dtype=float).reshape(-1, 3)
+    R = scipy.linalg.block_diag(*[np.asarray(m[4], dtype=float) for m in measurements])
+    keys = sorted({f"wall:{m[0]}" for m in measurements if m[3] is not None})
+    H_aux = np.zeros((len(nu), len(keys)))
+    for r, m in enumerate(measurements):
+        if m[3] is not None:
+            H_aux[2 * r:2 * r + 2, keys.index(f"wall:{m[0]}")] = m[3]
+    return nu, H, keys, H_aux, R
+
+
+def apply_wall_measurements(ekf: JointEKF, measurements) -> None:
+    """Update ``ekf`` with a frame's wall measurements (:attr:`FrameRecord.wall_measurements`), entering each
+    wall's shared disparity error as an auxiliary state (variance σ_β², :meth:`JointEKF.add_aux`) when it has
+    none: what :meth:`Localizer.step` does with ``ekf.wall_updates``, so that a run's records replay it."""
+    if not measurements:
+        return
+    nu, H, keys, H_aux, R = _wall_terms(measurements)
+    var = {f"wall:{m[0]}": float(m[5]) for m in measurements if m[3] is not None}
+    aux = [ekf.aux_index(k) if ekf.aux_index(k) is not None else ekf.add_aux(k, var[k]) for k in keys]
+    ekf.update_pose_aux(nu, H, aux, H_aux, R)
 
 
 class Localizer:
@@ -654,6 +686,54 @@ class Localizer:
         self.ekf.update_known_points(pts, z, R, pan, cov_points=cov_map)
         return [(b.plane_id, b.edge, float(b.u[0]), float(b.u[1]), np.asarray(b.cov_uv).tolist()) for b in keep]
 
+    def _update_walls(self, model: FrameLandmarks, entered: Entered, cam_k: StereoCamera) -> list:
+        """Update the pose with the walls fitted in this frame (``ekf.wall_updates``).
+
+        A wall's fitted line ``(a, b)`` in its own frame is ``J (X_fit − X) + J_β β_w + w`` for the true pose
+        ``X`` (:func:`~stablemarks.landmarks.seen_wall_jacobian` at the belief ``X_fit`` the fit was placed with),
+        ``β_w`` the disparity error the wall's pixels share (:attr:`PlaneFit.J_bias`) and ``w`` the rest of the
+        fit's error with the map's accuracy. ``β_w`` stays with a wall from frame to frame (measured: the fitted
+        offset's error at the true pose is correlated 0.2–0.7 over 20 frames), so it is a state of the filter,
+        one per wall (:meth:`JointEKF.add_aux`, prior σ ``planes.disparity_bias_px``), not noise counted anew in
+        every frame: seeing a wall again from the same place adds nothing the first view did not give. Only walls
+        used in the frame (not gated), jointly within the 99 % χ² bound, and not the walls new landmarks were
+        modelled on in this frame (their positions come from the same fit: used twice, the pose and those
+        landmarks would seem independent). Returns the measurements used (:attr:`FrameRecord.wall_measurements`)."""
+        used = {c.plane_id for c in entered.candidates if c is not None}
+        fits = [pm.fit for pm in model.planes if not pm.gated and pm.fit and pm.fit.plane.id not in used]
+        if not fits:
+            return []
+        cov_map = self.world_map.accuracy_cov
+        var_beta = float(self.config.planes.disparity_bias_px) ** 2
+        X = self.ekf.pose
+        measurements = []
+        for f in fits:
+            J = seen_wall_jacobian(cam_k, f)
+            dX = np.asarray(f.X, dtype=float) - X
+            dX[2] = wrap_angle(dX[2])
+            R = np.asarray(f.cov_R, dtype=float) + cov_map
+            shared = var_beta > 0 and f.J_bias is not None
+            if shared:
+                R = R - var_beta * np.outer(f.J_bias, f.J_bias)  # the shared part is the state's
+            measurements.append((f.plane.id, (np.array([f.a, f.b]) - J @ dX).tolist(), (-J).tolist(),
+                                 np.asarray(f.J_bias, dtype=float).tolist() if shared else None, R.tolist(), var_beta,
+                                 X.tolist()))
+        nu, H, keys, H_aux, R = _wall_terms(measurements)
+        idx = [0, 1, 2] + [self.ekf.aux_index(k) for k in keys]
+        known = [i for i in idx if i is not None]
+        Hf = np.hstack([H, H_aux])
+        P = np.zeros((len(idx), len(idx)))
+        at = [n for n, i in enumerate(idx) if i is not None]
+        P[np.ix_(at, at)] = self.ekf.cov_block(known)
+        for n, i in enumerate(idx):
+            if i is None:
+                P[n, n] = var_beta  # a wall seen for the first time: its prior
+        S = Hf @ P @ Hf.T + R
+        if float(nu @ np.linalg.solve(S, nu)) > float(chdtri(len(nu), 0.01)):
+            return []
+        apply_wall_measurements(self.ekf, measurements)
+        return measurements
+
     def _edge_observations(self, boundaries) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Snapped ``boundaries`` as observations of the map's free edges: the edges' map positions (m, 2), the
         boundaries' columns (m, 2) and covariances (m, 2, 2), the edges' map covariances (m, 2, 2)."""
@@ -912,6 +992,9 @@ class Localizer:
             if not pan_suspect and not recovering and self.config.ekf.edge_updates and model is not None \
                     and len(record.observed) >= self.config.health.min_pattern and not self.health.active:
                 record.edge_measurements = self._update_edges(model, entered, record.measurements, pan)
+            if not pan_suspect and not recovering and self.config.ekf.wall_updates and model is not None \
+                    and len(record.observed) >= self.config.health.min_pattern and not self.health.active:
+                record.wall_measurements = self._update_walls(model, entered, cam_k)
             timings["select"] = time.perf_counter() - t3
         drift = None
         if method.uses_vision and self.health.drift is None:

@@ -425,6 +425,10 @@ class PlaneFit:
     chi2_dof: float
     X: np.ndarray = field(repr=False)
     box: tuple[slice, slice] = (slice(None), slice(None))
+    J_bias: np.ndarray | None = field(default=None, repr=False)
+    """(2,) ``∂(a, b)/∂β``: how a disparity error ``β`` [px] shared by all the wall's pixels moves the fitted line
+    (``planes.disparity_bias_px`` is its σ; :class:`~stablemarks.localizer.Localizer` with ``ekf.wall_updates``
+    estimates it per wall)."""
 
     def __bool__(self) -> bool:
         return True
@@ -562,13 +566,13 @@ def fit_plane(
     cov_R = N_inv * max(1.0, chi2_dof) * config.correlation_px * len(s) / n
     if clustered:
         cov_R = _at_least(cov_R, _sandwich(N_inv, scores))
+    # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,
+    # o − c_o), Z the pixel's depth; the line (a, b) follows through the weighted least squares
+    depth = (s_in - c_s) * (fwd @ plane.direction) + (o_in - c_o) * (fwd @ plane.normal)
+    g = -(depth / fb) * ((o_in - c_o) - b * (s_in - c_s))
+    J_beta = N_inv @ np.array([wgt @ g, w_ds @ g])
     if config.disparity_bias_px > 0 or config.disparity_tilt_px > 0:
-        # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,
-        # o − c_o), Z the pixel's depth; the line (a, b) follows through the weighted least squares
-        depth = (s_in - c_s) * (fwd @ plane.direction) + (o_in - c_o) * (fwd @ plane.normal)
-        g = -(depth / fb) * ((o_in - c_o) - b * (s_in - c_s))
         if config.disparity_bias_px > 0:
-            J_beta = N_inv @ np.array([wgt @ g, w_ds @ g])
             cov_R = cov_R + config.disparity_bias_px**2 * np.outer(J_beta, J_beta)
         if config.disparity_tilt_px > 0:
             # the error γ x(u) with x from −1 to 1 across the inliers' columns: each pixel's g times its x
@@ -580,7 +584,7 @@ def fit_plane(
     # every band pixel within the final limit, written into the image-sized region
     region = np.zeros(np.shape(disparity), dtype=bool)
     n_keep = _on_line_region(region, rows.start, cols.start, disp, band, *frame, a, b, s0, config.outlier_sigma * scale)
-    return PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, n_keep, chi2_dof, X, (rows, cols))
+    return PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, n_keep, chi2_dof, X, (rows, cols), J_beta)
 
 
 @njit(cache=True)

@@ -35,7 +35,7 @@ import numpy as np
 
 from .config import Config
 from .errors import InputError, expected
-from .geometry import SE2, StereoCamera, rot2
+from .geometry import SE2, StereoCamera, rot2, wrap_angle
 from .maps import ReferencePlane
 
 GTSAM_HINT = "the gtsam_batch smoother needs the optional gtsam extra: pip install 'stablemarks[gtsam]'"
@@ -195,6 +195,36 @@ def edge_factor(pose_key: int, camera: StereoCamera, point, measured, cov_uv, co
     return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(0.5 * (cov + cov.T)), [pose_key], error)
 
 
+def wall_factor(pose_key: int, bias_key: int | None, nu, H_X, J_bias, R, X_lin):
+    """A gtsam ``CustomFactor`` on the ``Pose2`` at ``pose_key`` (and the wall's shared disparity error, a
+    1-vector at ``bias_key``, when ``J_bias`` is given): a wall fitted in a frame (the filter's ``ekf.wall_updates``,
+    :attr:`~stablemarks.localizer.FrameRecord.wall_measurements`), linear about the pose ``X_lin`` of the filter's
+    update: residual ``H_X (X − X_lin) + J_β β − ν`` [m, 1] with noise ``R``."""
+    gtsam = _gtsam()
+    nu = np.asarray(nu, dtype=float).reshape(2)
+    H_X = np.asarray(H_X, dtype=float).reshape(2, 3)
+    X_lin = np.asarray(X_lin, dtype=float).reshape(3)
+    J_b = None if J_bias is None else np.asarray(J_bias, dtype=float).reshape(2, 1)
+    keys = [pose_key] if J_b is None else [pose_key, bias_key]
+
+    def error(this, values, H):
+        pose = values.atPose2(pose_key)
+        X = np.array([pose.x(), pose.y(), pose.theta()])
+        d = X - X_lin
+        d[2] = wrap_angle(d[2])
+        r = H_X @ d - nu
+        if J_b is not None:
+            r = r + J_b[:, 0] * float(values.atVector(bias_key)[0])
+        if H is not None:
+            H[0] = H_X @ _pose_to_world(X[2])
+            if J_b is not None:
+                H[1] = J_b.copy()
+        return r
+
+    R = np.asarray(R, dtype=float).reshape(2, 2)
+    return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(0.5 * (R + R.T)), keys, error)
+
+
 def group_prior_factor(keys, values, cov):
     """A gtsam ``CustomFactor`` on the 1-vectors ``s`` at ``keys`` (n,): the joint prior ``s ~ N(values, cov)``
     of landmarks entered together (cov (n, n), full: their shared boundary error, DESIGN §4)."""
@@ -225,7 +255,7 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
     Raises :class:`InputError` when gtsam is not installed or the run holds point landmarks.
     """
     gtsam = _gtsam()
-    from gtsam.symbol_shorthand import L, X
+    from gtsam.symbol_shorthand import B, L, X
 
     records = result.records
     if not records:
@@ -237,6 +267,7 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
     graph.add(gtsam.PriorFactorPose2(X(0), gtsam.Pose2(*start),
                                      gtsam.noiseModel.Gaussian.Covariance(world_to_tangent_cov(result.cov0, start[2]))))
     walls: dict[int, tuple[ReferencePlane, str]] = {}
+    biases: dict[str, int] = {}  # each wall's shared disparity error (ekf.wall_updates)
 
     def wall(lid: int) -> tuple[ReferencePlane, str]:
         if lid not in walls:
@@ -272,6 +303,13 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
         for plane_id, edge, u_l, u_r, cov_uv in getattr(rec, "edge_measurements", []):
             graph.add(edge_factor(X(k), cam_k, result.world_map[plane_id].edge(edge), (u_l, u_r), cov_uv,
                                   result.world_map.edge_cov(plane_id, edge), rec.pose))
+        for plane_id, nu, H_X, J_bias, R, var_beta, X_lin in getattr(rec, "wall_measurements", []):
+            if J_bias is not None and plane_id not in biases:
+                biases[plane_id] = B(len(biases))
+                initial.insert(biases[plane_id], np.zeros(1))
+                graph.add(gtsam.PriorFactorVector(biases[plane_id], np.zeros(1),
+                                                  gtsam.noiseModel.Isotropic.Sigma(1, float(np.sqrt(var_beta)))))
+            graph.add(wall_factor(X(k), biases.get(plane_id), nu, H_X, J_bias, R, X_lin))
 
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(int(max_iterations))

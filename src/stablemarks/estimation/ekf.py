@@ -143,11 +143,13 @@ class EKFConfig:
     recheck_sigma: float = 3.0
     landmark_sigma_floor: float = 0.005
     edge_updates: bool = False
+    wall_updates: bool = False
     iterations: int = 5
 
     def __post_init__(self) -> None:
-        if not isinstance(self.edge_updates, bool):
-            raise ConfigError(expected("true or false", self.edge_updates, where="ekf.edge_updates"))
+        for name in ("edge_updates", "wall_updates"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(expected("true or false", getattr(self, name), where=f"ekf.{name}"))
         if not 0.0 < self.gate_probability < 1.0:
             raise ConfigError(expected("a probability in (0, 1)", self.gate_probability,
                                        where="ekf.gate_probability"))
@@ -621,6 +623,7 @@ class JointEKF:
         self._panned = (camera.pan, camera)
         self._tracks: dict[int, _Track] = {}
         self._next_id = 0
+        self._aux: dict[str, int] = {}  # auxiliary states (a wall's shared disparity error), between pose and landmarks
         self._reindex()
 
     # --------------------------------------------------------- bookkeeping
@@ -631,10 +634,15 @@ class JointEKF:
         self._row = {int(i): r for r, i in enumerate(self._ids)}
         tracks = list(self._tracks.values())
         dims = np.array([t.dim for t in tracks], dtype=int)
-        first = 3 + np.concatenate([[0], np.cumsum(dims)[:-1]]).astype(int) if n else np.zeros(0, dtype=int)
+        first = self._l0 + np.concatenate([[0], np.cumsum(dims)[:-1]]).astype(int) if n else np.zeros(0, dtype=int)
         self._idx2 = np.stack([first, first + dims - 1], axis=1)  # state indices of (l_1, l_2); walls repeat l_1
         self._start = np.array([t.start for t in tracks]).reshape(n, 2)
         self._J_p_l = np.array([t.J_p_l for t in tracks]).reshape(n, 2, 2)
+
+    @property
+    def _l0(self) -> int:
+        """The state index of the first landmark: after the pose and the auxiliary states."""
+        return 3 + len(self._aux)
 
     def _rows(self, ids, where: str) -> np.ndarray:
         ids = [int(i) for i in ids]
@@ -789,6 +797,51 @@ class JointEKF:
         H = _matrix(H, (k, 3), "update_pose.H")
         R = _matrix(R, (k, k), "update_pose.R")
         PHt, S, sol = self._gain(np.arange(3), H, nu, R)
+        K = sol[:, :-1].T
+        self._x += K @ nu
+        self._x[2] = wrap_angle(self._x[2])
+        _add_sym_rank(self._P, 0.5 * (K @ S) - PHt, K)
+        return float(nu @ sol[:, -1])
+
+    def cov_block(self, indices: Sequence[int]) -> np.ndarray:
+        """The covariance over the state ``indices`` (a copy), without copying the whole of ``P``."""
+        idx = np.asarray(indices, dtype=int)
+        return self._P[np.ix_(idx, idx)].copy()
+
+    def aux_index(self, key: str) -> int | None:
+        """The state index of the auxiliary state ``key`` (:meth:`add_aux`), None if it has none."""
+        return self._aux.get(key)
+
+    def add_aux(self, key: str, variance: float) -> int:
+        """Add a scalar auxiliary state ``key`` with mean 0 and ``variance``, uncorrelated with the rest, and return
+        its state index: an error shared by a wall's measurements over many frames (its disparity error, ``ekf.
+        wall_updates``), estimated with the pose instead of counted anew in every frame. It sits between the pose
+        and the landmarks, is constant under :meth:`predict`, and is not a landmark (no id, not observed as one)."""
+        if key in self._aux:
+            raise InputError(f"add_aux: the auxiliary state {key!r} exists")
+        if not (np.isfinite(variance) and variance > 0):
+            raise InputError(expected("a positive variance", variance, where="add_aux.variance"))
+        i = self._l0
+        self._x = np.insert(self._x, i, 0.0)
+        P = np.insert(np.insert(self._P, i, 0.0, axis=0), i, 0.0, axis=1)
+        P[i, i] = float(variance)
+        self._P = P
+        self._aux[key] = i
+        self._reindex()
+        return i
+
+    def update_pose_aux(self, nu, H, aux: Sequence[int], H_aux, R) -> float:
+        """:meth:`update_pose` for a measurement that also depends on auxiliary states: ``H`` (k, 3) over the pose,
+        ``H_aux`` (k, len(aux)) over the states at indices ``aux`` (:meth:`add_aux`). Joseph form; returns the
+        innovation's Mahalanobis²."""
+        nu = np.asarray(nu, dtype=float).reshape(-1)
+        k = len(nu)
+        aux = [int(a) for a in aux]
+        if any(not 3 <= a < self._l0 for a in aux):
+            raise InputError(expected("indices of auxiliary states", aux, where="update_pose_aux.aux"))
+        H = np.hstack([_matrix(H, (k, 3), "update_pose_aux.H"), _matrix(H_aux, (k, len(aux)), "update_pose_aux.H_aux")])
+        R = _matrix(R, (k, k), "update_pose_aux.R")
+        PHt, S, sol = self._gain(np.array([0, 1, 2, *aux]), H, nu, R)
         K = sol[:, :-1].T
         self._x += K @ nu
         self._x[2] = wrap_angle(self._x[2])
@@ -1345,7 +1398,7 @@ class JointEKF:
         the (D, D) covariance over all landmark state dimensions in state order (cross-covariances kept)."""
         d = {"pose": self.pose.tolist(), "cov_pose": self.cov_pose.tolist(), "landmarks": self.landmarks_to_dict()}
         if joint:
-            d["cov_landmarks"] = self._P[3:, 3:].tolist()
+            d["cov_landmarks"] = self._P[self._l0:, self._l0:].tolist()
         return d
 
     def load_prior_landmarks(self, data, world_map: Map, *, source: str = "landmarks") -> list[int]:

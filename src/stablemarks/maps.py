@@ -665,7 +665,7 @@ def visible_parts(
     targets = [p for p in (planes if planes is not None else world_map.planes) if p.faces(centre)]
     if not targets:
         return []
-    walls = world_map.segments()  # (K, 2, 2)
+    walls = world_map._segments  # (K, 2, 2), made once per map (read-only)
     own = np.array([index[p.id] for p in targets])
     P1 = walls[own, 0]  # (T, 2)
     length = np.array([p.length for p in targets])
@@ -708,21 +708,21 @@ def visible_parts(
         lam = _crossings(centre, pts[ok] - centre, walls)
         lam[np.arange(len(lam)), own[row[ok]]] = np.nan  # a wall does not hide itself
         ok[ok] = ~_blocked(lam)
-    seen = np.zeros(test.shape, dtype=bool)
-    seen[row, col] = ok
+    # the runs of seen pieces of each wall, over its tested pieces only (in order: np.nonzero's row-major order):
+    # a wall's break points are a few among the map's many, so most of its pieces are empty and were walked for
+    # nothing (hall: 31 walls, ~60 pieces each, 1 in 7 tested)
+    found: list[list[list[float]]] = [[] for _ in targets]
+    run, prev = False, -1
+    for r, a, z, v in zip(row.tolist(), lo[row, col].tolist(), hi[row, col].tolist(), ok.tolist(), strict=True):
+        if r != prev:
+            run, prev = False, r
+        if v and run:
+            found[r][-1][1] = z
+        elif v:
+            found[r].append([a, z])
+        run = v
     out: list[VisiblePart] = []
-    for plane, lo_i, hi_i, test_i, seen_i in zip(targets, lo.tolist(), hi.tolist(), test.tolist(), seen.tolist(),
-                                                strict=True):
-        intervals: list[list[float]] = []
-        run = False
-        for a, z, tested, v in zip(lo_i, hi_i, test_i, seen_i, strict=True):
-            if not tested:
-                continue
-            if v and run:
-                intervals[-1][1] = z
-            elif v:
-                intervals.append([a, z])
-            run = v
+    for plane, intervals in zip(targets, found, strict=True):
         if not intervals:
             continue
         free = tuple(

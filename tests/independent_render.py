@@ -13,6 +13,10 @@ right of and 0.5 px above where the pinhole model ``u = cu + f X/Z``, ``v = cv +
 principal point. Each image is rendered at ``supersample`` times the resolution and box-filtered down (a real
 sensor integrates over its pixel; TinyRenderer has no anti-aliasing), then Gaussian noise is added.
 
+:class:`SceneRenderer` builds a scene once and renders it from many poses (a whole sequence:
+``benchmarks/independent_sequence.py``), optionally with a grey ``background`` where nothing is; :func:`render_pair`
+is it for one pose.
+
 Frames are the project's (``stablemarks.geometry``): the map is ``x, y`` on the floor, ``z`` up; the left optical
 centre is at the robot's position ``mount_height`` above the floor looking along its heading; the right one is
 ``baseline`` to its right.
@@ -240,6 +244,80 @@ def names(scene: Scene) -> tuple[str, ...]:
     return tuple(o.name for o in (*scene.surfaces, *scene.poles, *scene.discs))
 
 
+class SceneRenderer:
+    """A :class:`Scene` built once in a headless pybullet client, rendered from many poses (a whole sequence):
+    ``with SceneRenderer(scene) as r: pair = r.render(camera, X, rng=...)``. :func:`render_pair` is this for
+    one pose."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.cid: int | None = None
+        self.lut = np.full(1, -1, np.int64)
+
+    def __enter__(self) -> SceneRenderer:
+        import pybullet as p
+
+        self.cid = p.connect(p.DIRECT)
+        try:
+            with tempfile.TemporaryDirectory(prefix="indep_render_") as tmp:
+                ids = _build(p, self.cid, self.scene, Path(tmp))
+        except BaseException:
+            self.close()
+            raise
+        self.lut = np.full(max(ids, default=0) + 2, -1, np.int64)
+        for body, k in ids.items():
+            self.lut[body] = k
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.cid is not None:
+            import pybullet as p
+
+            p.disconnect(self.cid)
+            self.cid = None
+
+    def render(self, camera, X, *, supersample: int = 3, noise_sigma: float = 1.5, rng=None, seed: int = 0,
+               ambient: float = 0.65, background: float | None = None,
+               light_direction=(-1.0, -2.0, 3.0)) -> RenderedPair:
+        """The stereo pair of ``camera`` at robot pose ``X`` (:func:`render_pair`); noise from ``rng`` (a
+        ``numpy`` generator; default one of ``seed``), left image first. ``background``: the grey level
+        [0–255] of sub-samples that see nothing (default: TinyRenderer's white)."""
+        import pybullet as p
+
+        if self.cid is None:
+            raise RuntimeError("SceneRenderer.render outside its with block")
+        cid, lut = self.cid, self.lut
+        s = int(supersample)
+        W, H = camera.width * s, camera.height * s
+        P = projection_matrix(W, H, camera.f * s, camera.cu * s + (s - 1) / 2, camera.cv * s + (s - 1) / 2)
+        rng = np.random.default_rng(seed) if rng is None else rng
+        c_left, c_right, psi = camera_centres(camera, X)
+        fwd = np.array([math.cos(psi), math.sin(psi), 0.0])
+        images, labels = [], []
+        for eye in (c_left, c_right):
+            V = p.computeViewMatrix(eye.tolist(), (eye + fwd).tolist(), [0.0, 0.0, 1.0], physicsClientId=cid)
+            _, _, rgb, _, seg = p.getCameraImage(
+                W, H, V, P, renderer=p.ER_TINY_RENDERER, shadow=0, lightDirection=list(light_direction),
+                lightAmbientCoeff=ambient, lightDiffuseCoeff=1.0 - ambient, lightSpecularCoeff=0.0,
+                physicsClientId=cid)
+            rgb = np.asarray(rgb, np.uint8).reshape(H, W, 4)[..., :3].astype(float)
+            gray = rgb @ np.array([0.299, 0.587, 0.114])
+            seg = np.asarray(seg, np.int64).reshape(H, W)
+            if background is not None:
+                gray = np.where(seg < 0, float(background), gray)
+            gray = gray.reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
+            gray = gray + noise_sigma * rng.standard_normal(gray.shape)
+            images.append(np.clip(np.rint(gray), 0, 255).astype(np.uint8))
+            lab = np.where(seg >= 0, lut[np.clip(seg, 0, len(lut) - 1)], -1)
+            blocks = lab.reshape(camera.height, s, camera.width, s)
+            same = (blocks == blocks[:, :1, :, :1]).all(axis=(1, 3))
+            labels.append(np.where(same, blocks[:, 0, :, 0], -1))
+        return RenderedPair(images[0], images[1], labels[0], labels[1], names(self.scene))
+
+
 def render_pair(scene: Scene, camera, X, *, supersample: int = 3, noise_sigma: float = 1.5, seed: int = 0,
                 ambient: float = 0.65) -> RenderedPair:
     """Render the stereo pair of ``camera`` (a :class:`~stablemarks.geometry.StereoCamera`, zero pan and mount
@@ -250,41 +328,8 @@ def render_pair(scene: Scene, camera, X, *, supersample: int = 3, noise_sigma: f
     ``supersample`` × ``supersample`` blocks, converted to gray (BT.601) and given Gaussian noise of
     ``noise_sigma`` grey levels (``numpy`` generator of ``seed``). Light: ``ambient`` plus diffuse from above
     behind the camera, no specular, no shadows."""
-    import pybullet as p
-
-    s = int(supersample)
-    W, H = camera.width * s, camera.height * s
-    P = projection_matrix(W, H, camera.f * s, camera.cu * s + (s - 1) / 2, camera.cv * s + (s - 1) / 2)
-    rng = np.random.default_rng(seed)
-    cid = p.connect(p.DIRECT)
-    try:
-        with tempfile.TemporaryDirectory(prefix="indep_render_") as tmp:
-            ids = _build(p, cid, scene, Path(tmp))
-            lut = np.full(max(ids, default=0) + 2, -1, np.int64)
-            for body, k in ids.items():
-                lut[body] = k
-            c_left, c_right, psi = camera_centres(camera, X)
-            fwd = np.array([math.cos(psi), math.sin(psi), 0.0])
-            images, labels = [], []
-            for eye in (c_left, c_right):
-                V = p.computeViewMatrix(eye.tolist(), (eye + fwd).tolist(), [0.0, 0.0, 1.0], physicsClientId=cid)
-                _, _, rgb, _, seg = p.getCameraImage(
-                    W, H, V, P, renderer=p.ER_TINY_RENDERER, shadow=0, lightDirection=[-1.0, -2.0, 3.0],
-                    lightAmbientCoeff=ambient, lightDiffuseCoeff=1.0 - ambient, lightSpecularCoeff=0.0,
-                    physicsClientId=cid)
-                rgb = np.asarray(rgb, np.uint8).reshape(H, W, 4)[..., :3].astype(float)
-                gray = rgb @ np.array([0.299, 0.587, 0.114])
-                gray = gray.reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
-                gray = gray + noise_sigma * rng.standard_normal(gray.shape)
-                images.append(np.clip(np.rint(gray), 0, 255).astype(np.uint8))
-                seg = np.asarray(seg, np.int64).reshape(H, W)
-                lab = np.where(seg >= 0, lut[np.clip(seg, 0, len(lut) - 1)], -1)
-                blocks = lab.reshape(camera.height, s, camera.width, s)
-                same = (blocks == blocks[:, :1, :, :1]).all(axis=(1, 3))
-                labels.append(np.where(same, blocks[:, 0, :, 0], -1))
-    finally:
-        p.disconnect(cid)
-    return RenderedPair(images[0], images[1], labels[0], labels[1], names(scene))
+    with SceneRenderer(scene) as r:
+        return r.render(camera, X, supersample=supersample, noise_sigma=noise_sigma, seed=seed, ambient=ambient)
 
 
 # ------------------------------------------------------------------ the test scenes

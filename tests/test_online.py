@@ -173,7 +173,13 @@ def test_records_replay_the_filter(lab_short, lab_short_edges, lab_short_walls, 
             for i, s in zip(ids, values, strict=True):
                 lm = result.ekf.landmark(i)
                 new.append(NewLandmark.wall(result.world_map[lm.plane_id], s, lm.edge, lm.z_low, lm.z_high))
-            ekf.add_landmarks(new, cov, ids=ids)
+            tie = [(G, X) for i, G, X in rec.landmark_couplings if list(i) == list(ids)]
+            if tie:  # entered tied to the pose (ekf.tie_blind_entries)
+                G = np.asarray(tie[0][0])
+                ekf.add_landmarks(new, np.asarray(cov) + G @ ekf.cov_pose @ G.T, cov_pose_new=ekf.cov_pose @ G.T,
+                                  ids=ids)
+            else:
+                ekf.add_landmarks(new, cov, ids=ids)
         if rec.edge_measurements:  # free edges found again (ekf.edge_updates), after the landmarks entered
             wm = result.world_map
             ekf.update_known_points([wm[p].edge(e) for p, e, *_ in rec.edge_measurements],

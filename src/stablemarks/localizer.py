@@ -161,6 +161,10 @@ class FrameRecord:
     landmark_priors: list[tuple[list[int], list[float], np.ndarray]] = field(default_factory=list)
     """Landmarks entered in this frame, in groups: ``(ids, initial state values, joint covariance)``; the
     cross-covariance with the pose is zero for wall landmarks (DESIGN §4)."""
+    landmark_couplings: list[tuple[list[int], list[list[float]], list[float]]] = field(default_factory=list)
+    """Groups of :attr:`landmark_priors` entered tied to the pose (``ekf.tie_blind_entries``): ``(ids, G (n, 3),
+    X)``, their errors ``G (X_true − X)`` plus the prior's; the filter held ``cov + G P_XX Gᵀ`` with cross-covariance
+    ``P_XX Gᵀ`` to the pose ``X`` they were entered from."""
     edge_measurements: list[tuple[str, str, float, float, list[list[float]]]] = field(default_factory=list)
     """Free edges found in this frame that updated the pose (``ekf.edge_updates``): ``(plane id, edge, u_l, u_r,
     covariance of (u_l, u_r) [px²])``; the map's accuracy is added to it."""
@@ -394,6 +398,7 @@ class Localizer:
         self._lost_frames = 0
         """Frames in a row with no landmark found and the walls fitted away from the pose (:meth:`_relocalize`)."""
         self._unconfirmed: set[int] = set()
+        self._observed_once = False  # a frame has updated from landmarks: the pose is no longer the start's alone
         """Landmarks entered in a frame that observed none of the filter's landmarks (the pose then rested on the
         odometry alone), until they are observed again: the frame's lines do not relocalize the pose onto them
         (:meth:`_relocation_from_lines`)."""
@@ -979,9 +984,15 @@ class Localizer:
                 if chosen and model is not None:
                     model, rechecked = self._recheck_boundaries(model, pan, record)
                 closed = self._walls_missed(model, assoc, pan, record)
+                # a frame that found none of the filter's landmarks enters its new ones tied to the pose
+                # (enter_wall_landmarks): their boundary was told from other lines by the pose alone
+                tied = self.config.ekf.tie_blind_entries and not record.observed and self._observed_once
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
-                                       self.config, closed_planes=closed)
+                                       self.config, closed_planes=closed, tied=tied)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
+            self._observed_once = self._observed_once or bool(record.observed)
+            record.landmark_couplings = [(ids, np.asarray(G).tolist(), np.asarray(X).tolist())
+                                         for ids, G, X in entered.couplings]
             if self._unconfirmed:  # confirmed once observed again (or gone)
                 present = set(self.ekf.landmark_ids)
                 self._unconfirmed = {i for i in self._unconfirmed

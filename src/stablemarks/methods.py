@@ -40,6 +40,9 @@ class Entered:
     ids: list[int] = field(default_factory=list)
     candidates: list[Candidate | None] = field(default_factory=list)
     priors: list[tuple[list[int], list[float], np.ndarray]] = field(default_factory=list)
+    couplings: list[tuple[list[int], np.ndarray, np.ndarray]] = field(default_factory=list)
+    """Groups entered tied to the pose (``enter(..., tied=True)``): ``(ids, G (n, 3), X)``: their errors are
+    ``G (X_true − X)`` plus the prior's, ``X`` the pose they were entered from."""
 
 
 class Method:
@@ -122,16 +125,19 @@ class Method:
 
     def enter(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, used_pairs: set[int],
               camera: StereoCamera, world_map: Map, frame: int, config: Config, *,
-              closed_planes: frozenset[str] = frozenset()) -> Entered:
+              closed_planes: frozenset[str] = frozenset(), tied: bool = False) -> Entered:
         """Enter the frame's new wall landmarks, jointly per boundary (:func:`enter_wall_landmarks`), on every wall
-        but ``closed_planes`` (ids of walls whose landmarks in view this frame did not find)."""
+        but ``closed_planes`` (ids of walls whose landmarks in view this frame did not find); ``tied``: with the
+        cross-covariance to the pose their image positions imply (a frame that found none of the filter's
+        landmarks: the boundary they are measured from was told from other lines by the pose alone)."""
         fresh = [c for c in self.take(model) if c.pair not in used_pairs and c.plane_id not in closed_planes
                  and not is_duplicate(ekf, c)]
         pairs = front.kept_pairs
         polarity = front.left_segments.polarity[pairs.left_index]
         centre = camera.optical_centres(ekf.pose)[0]
         along = {c.pair: int(wall_polarity(int(polarity[c.pair]), world_map[c.plane_id], centre)) for c in fresh}
-        return enter_wall_landmarks(ekf, world_map, fresh, frame, along, config.landmarks.filter_boundary_sigma)
+        return enter_wall_landmarks(ekf, world_map, fresh, frame, along, config.landmarks.filter_boundary_sigma,
+                                    tied_camera=camera if tied else None)
 
 
 class PlaneNoSelection(Method):
@@ -153,7 +159,7 @@ class AllSegments(Method):
         return None
 
     def enter(self, ekf, front, model, used_pairs, camera, world_map, frame, config, *,
-              closed_planes=frozenset()) -> Entered:
+              closed_planes=frozenset(), tied=False) -> Entered:
         pairs = front.kept_pairs
         idx = [j for j in range(len(pairs)) if j not in used_pairs]
         ids = enter_point_landmarks(ekf, camera, pairs, idx, frame)
@@ -180,11 +186,41 @@ def method_named(name: str) -> Method:
 
 
 # ------------------------------------------------------------------ entering landmarks
+def along_wall_jacobian(camera: StereoCamera, X, plane, edge: str, u_left) -> np.ndarray:
+    """``G = ∂s/∂X`` (n, 3): how the point where the left camera's ray through column ``u_left`` (n,) meets the
+    wall moves along it (``s`` from ``edge``) with the pose, by central differences."""
+    t = plane.direction if edge == "p1" else -plane.direction
+    u = np.atleast_1d(np.asarray(u_left, dtype=float))
+
+    def s_of(Xp):
+        c = camera.from_camera(Xp, np.zeros_like(u), np.zeros_like(u))
+        d = camera.from_camera(Xp, (u - camera.cu) / camera.f, np.ones_like(u)) - c
+        # c + λ d = P1 + s t  →  λ from the normal, s along t
+        n = plane.normal
+        lam = ((np.asarray(plane.P1) - c) @ n) / (d @ n)
+        return (c + lam[:, None] * d - plane.point_at(0.0, edge)) @ t
+
+    G = np.empty((len(u), 3))
+    for i, h in enumerate((1e-4, 1e-4, 1e-5)):
+        e = np.zeros(3)
+        e[i] = h
+        G[:, i] = (s_of(np.asarray(X, dtype=float) + e) - s_of(np.asarray(X, dtype=float) - e)) / (2 * h)
+    return G
+
+
 def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
-                         polarity: dict[int, int] | None = None, boundary_sigma: str = "model") -> Entered:
+                         polarity: dict[int, int] | None = None, boundary_sigma: str = "model",
+                         tied_camera: StereoCamera | None = None) -> Entered:
     """Enter candidates as wall landmarks, jointly per boundary: ``Σ = J Σ_shared Jᵀ + diag(σ_own²)`` from each
     candidate's error model (the fitted line and the boundary shared; see :class:`~stablemarks.landmarks.Candidate`),
     or ``σ_b² 11ᵀ + diag(σ_f²)`` for candidates without one (DESIGN §4).
+
+    With ``tied_camera`` (the frame's panned camera) the group is entered tied to the pose: its error is taken to be
+    ``G δX`` (:func:`along_wall_jacobian`, the pose's error carried along the rays to the wall) plus ``Σ``, so the
+    filter holds ``Σ + G P_XX Gᵀ`` with cross-covariance ``P_XX Gᵀ``, as a SLAM filter enters what it measures from
+    an uncertain pose. Seen again from about the same place such landmarks then tell the pose little until a
+    landmark entered otherwise is seen with them; entered independent of the pose, two landmarks modelled from a
+    wrong boundary would pull the pose onto it with the confidence of a right one.
 
     ``polarity`` maps a candidate's pair index to its edge's polarity along the wall
     (:func:`~stablemarks.estimation.wall_polarity`); ``boundary_sigma``: which σ_b
@@ -210,7 +246,14 @@ def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
             sf = np.array([c.sigma_f for c in group])
             cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
         new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
-        added = ekf.add_landmarks(new, cov, frame=frame)
+        if tied_camera is not None:
+            X = ekf.pose
+            G = along_wall_jacobian(tied_camera, X, plane, edge, [c.u_left for c in group])
+            P_XX = ekf.cov_pose
+            added = ekf.add_landmarks(new, cov + G @ P_XX @ G.T, cov_pose_new=P_XX @ G.T, frame=frame)
+            out.couplings.append((added, G, X))
+        else:
+            added = ekf.add_landmarks(new, cov, frame=frame)
         out.priors.append((added, [float(c.s) for c in group], cov))
         out.ids += added
         out.candidates += group

@@ -225,6 +225,31 @@ def wall_factor(pose_key: int, bias_key: int | None, nu, H_X, J_bias, R, X_lin):
     return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(0.5 * (R + R.T)), keys, error)
 
 
+def tied_prior_factor(keys, pose_key: int, values, cov, G, X_lin):
+    """A gtsam ``CustomFactor`` on the 1-vectors ``s`` at ``keys`` (n,) and the ``Pose2`` at ``pose_key``: the prior of
+    landmarks entered tied to the pose (``ekf.tie_blind_entries``), ``s − values − G (X − X_lin) ~ N(0, cov)``."""
+    gtsam = _gtsam()
+    keys = [int(k) for k in keys]
+    mean = np.asarray(values, dtype=float).reshape(len(keys))
+    G = np.asarray(G, dtype=float).reshape(len(keys), 3)
+    X_lin = np.asarray(X_lin, dtype=float).reshape(3)
+    eye = np.eye(len(keys))
+
+    def error(this, vals, H):
+        pose = vals.atPose2(pose_key)
+        X = np.array([pose.x(), pose.y(), pose.theta()])
+        d = X - X_lin
+        d[2] = wrap_angle(d[2])
+        if H is not None:
+            for j in range(len(keys)):
+                H[j] = eye[:, j : j + 1].copy()
+            H[len(keys)] = -G @ _pose_to_world(X[2])
+        return np.array([float(vals.atVector(k)[0]) for k in keys]) - mean - G @ d
+
+    noise = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=float).reshape(len(keys), len(keys)))
+    return gtsam.CustomFactor(noise, [*keys, pose_key], error)
+
+
 def group_prior_factor(keys, values, cov):
     """A gtsam ``CustomFactor`` on the 1-vectors ``s`` at ``keys`` (n,): the joint prior ``s ~ N(values, cov)``
     of landmarks entered together (cov (n, n), full: their shared boundary error, DESIGN §4)."""
@@ -296,10 +321,15 @@ def batch_smooth(result, camera: StereoCamera, config: Config = Config(), *, mar
         for lid, u_l, u_r in rec.measurements:
             plane, edge = wall(int(lid))
             graph.add(observation_factor(X(k), L(int(lid)), cam_k, plane, edge, (u_l, u_r), sigma_img))
+        tied = {tuple(int(i) for i in ids): (G, X_lin) for ids, G, X_lin in getattr(rec, "landmark_couplings", [])}
         for ids, values, cov in rec.landmark_priors:
             for lid in ids:
                 wall(int(lid))
-            graph.add(group_prior_factor([L(int(i)) for i in ids], values, cov))
+            key = tuple(int(i) for i in ids)
+            if key in tied:
+                graph.add(tied_prior_factor([L(i) for i in key], X(k), values, cov, *tied[key]))
+            else:
+                graph.add(group_prior_factor([L(int(i)) for i in ids], values, cov))
         for plane_id, edge, u_l, u_r, cov_uv in getattr(rec, "edge_measurements", []):
             graph.add(edge_factor(X(k), cam_k, result.world_map[plane_id].edge(edge), (u_l, u_r), cov_uv,
                                   result.world_map.edge_cov(plane_id, edge), rec.pose))

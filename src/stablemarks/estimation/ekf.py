@@ -134,6 +134,23 @@ class EKFConfig:
         overconfident (run-mean pose NEES 87 and 20), and two fault recoveries fail with it (the room
         kidnapped by 0.5 m ends overconfident; the corridor whose pan is left out while the head turns is not
         recognised in time).
+    wall_updates : update the pose with the walls fitted in the frame (:meth:`Localizer._update_walls`): a wall's
+        fitted line says how far the camera is from it and how it is turned, to millimetres, where a landmark's
+        line says it only through its disparity (σ of centimetres at 3 m). The disparity error a wall's pixels
+        share stays with the wall over many frames, so it is a state of the filter per wall (:meth:`add_aux`,
+        prior σ ``planes.disparity_bias_px``, which must then be > 0), not noise counted in every frame. Off by
+        default: with ``planes.disparity_bias_px`` 0.03 and ``planes.disparity_tilt_px`` 0.06 (5 trials, December
+        2026) the ATE fell by a fifth to a third on every scene (lab 26.3 → 21.8 mm, corridor 16.0 → 13.6, room
+        26.4 → 19.0, office 11.6 → 7.9, hall 18.9 → 13.3), but corridor and office spent 15–17 % of their frames
+        above the pose NEES bounds (none before) and the office's landmarks became overconfident (landmark NEES
+        0.38 → 1.93): the walls' remaining errors (their tilt, the clutter in front of them) are not all in the
+        model yet.
+    tie_blind_entries : landmarks entered in a frame that found none of the filter's landmarks (after the first
+        frame that did) enter tied to the pose (:func:`~stablemarks.methods.enter_wall_landmarks`): the boundary
+        they are measured from was told from other lines by the pose alone, so they carry its error, with the
+        cross-covariance a SLAM filter gives what it measures. Entered independent of the pose after a blind
+        stretch (heading σ 6°), two landmarks modelled from a white board's end found on a coat stand's pole
+        pulled the pose 0.2 m off with σθ 0.9° (pose NEES 36, ``benchmarks/independent_sequence.py office``).
     """
 
     gate_probability: float = 0.99
@@ -144,10 +161,11 @@ class EKFConfig:
     landmark_sigma_floor: float = 0.005
     edge_updates: bool = False
     wall_updates: bool = False
+    tie_blind_entries: bool = True
     iterations: int = 5
 
     def __post_init__(self) -> None:
-        for name in ("edge_updates", "wall_updates"):
+        for name in ("edge_updates", "wall_updates", "tie_blind_entries"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(expected("true or false", getattr(self, name), where=f"ekf.{name}"))
         if not 0.0 < self.gate_probability < 1.0:

@@ -1,0 +1,95 @@
+"""Landmarks entered in a frame that found none of the filter's landmarks are tied to the pose
+(``ekf.tie_blind_entries``): their boundary was told from other lines by the pose alone, so they enter with the
+cross-covariance to the pose their image positions imply, as a SLAM filter enters what it measures."""
+
+import numpy as np
+import pytest
+
+import stablemarks as sm
+from stablemarks.estimation import JointEKF, NewLandmark
+from stablemarks.geometry import StereoCamera
+from stablemarks.maps import ReferencePlane
+from stablemarks.methods import along_wall_jacobian
+from stablemarks.sim.export import write_simulated_sequence
+from stablemarks.sim.run import simulate_run
+
+from .helpers import assert_psd
+
+WALL = ReferencePlane("wall", (-2.0, 3.0), (2.0, 3.0))  # along +x, 3 m ahead of a robot at the origin facing +y
+X0 = np.array([0.0, 0.0, np.pi / 2])
+
+
+@pytest.mark.parametrize("edge", ["p1", "p2"])
+def test_the_rays_hit_point_moves_along_the_wall_with_the_pose(edge):
+    cam = StereoCamera()
+    u = np.array([cam.cu, cam.cu + 150.0])
+    G = along_wall_jacobian(cam, X0, WALL, edge, u)
+    sign = 1.0 if edge == "p1" else -1.0
+    # moving the robot along the wall moves the hit point by as much; towards it, a ray off the axis slides out
+    np.testing.assert_allclose(G[:, 0], sign, atol=1e-6)
+    Zc = 3.0 - cam.mount_y if hasattr(cam, "mount_y") else 3.0
+    slope = (u - cam.cu) / cam.f
+    assert G[0, 1] == pytest.approx(0.0, abs=1e-6)
+    assert G[1, 1] == pytest.approx(-sign * slope[1], rel=1e-3)
+    # turning left by δ moves the hit point of the central ray to the left by about its range
+    assert G[0, 2] == pytest.approx(-sign * Zc, rel=0.1)
+
+
+def _observed_again(tied: bool):
+    cam = StereoCamera()
+    ekf = JointEKF(cam, X0, np.diag([0.05, 0.05, np.deg2rad(5.0)]) ** 2)
+    u = np.array([cam.cu - 120.0, cam.cu + 90.0])
+    s = np.array([1.5, 2.6])
+    new = [NewLandmark.wall(WALL, v) for v in s]
+    cov = np.diag([0.01, 0.01]) ** 2
+    if tied:
+        G = along_wall_jacobian(cam, X0, WALL, "p1", u)
+        ekf.add_landmarks(new, cov + G @ ekf.cov_pose @ G.T, cov_pose_new=ekf.cov_pose @ G.T)
+    else:
+        ekf.add_landmarks(new, cov)
+    assert_psd(ekf.cov)
+    before = ekf.cov_pose
+    z = ekf.predict_observation(ekf.landmark_ids).uv  # seen again where they were entered, from the same pose
+    ekf.update([(i, tuple(z[j])) for j, i in enumerate(ekf.landmark_ids)])
+    assert_psd(ekf.cov)
+    return before, ekf.cov_pose
+
+
+def test_tied_landmarks_seen_again_from_the_same_place_do_not_fix_the_heading():
+    """Two landmarks entered blind and seen again from where they were entered: tied, the heading keeps most of
+    its uncertainty (5° → 3.7°: only what the two lines' depths say of the mapped wall's angle); entered as if
+    independent of the pose, the same two would cut it to 0.9°, as if their places along the wall were known."""
+    before, tied = _observed_again(True)
+    _, free = _observed_again(False)
+    assert np.sqrt(tied[2, 2]) > 0.6 * np.sqrt(before[2, 2])
+    assert np.sqrt(free[2, 2]) < 0.25 * np.sqrt(before[2, 2])
+
+
+def test_a_frame_that_finds_no_landmark_enters_its_new_ones_tied(lab_scenario, tmp_path, monkeypatch):
+    seq = sm.open_sequence(write_simulated_sequence(simulate_run(lab_scenario, seed=4), tmp_path / "lab",
+                                                    n_frames=6))
+    frames = list(seq)
+    loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=sm.Config())
+    for f in frames[:3]:
+        rec = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan).record
+        assert not rec.landmark_couplings  # the first frame's are the map's: not tied
+    # the next frame finds none of the filter's landmarks (all dropped, as after a long blind stretch)
+    for i in loc.ekf.landmark_ids:
+        loc.ekf.remove_landmark(i)
+    rec = loc.step(frames[3].stamp, frames[3].left, frames[3].right, odometry=frames[3].odometry,
+                   pan=frames[3].pan).record
+    assert rec.new and not rec.observed
+    assert sorted(i for ids, _, _ in rec.landmark_couplings for i in ids) == sorted(rec.new)
+    P = loc.ekf.cov
+    assert np.abs(P[:3, 3:]).max() > 0  # cross-covariance with the pose
+    assert_psd(P)
+    # switched off, the same frame enters them independent of the pose
+    off = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose,
+                       config=sm.Config().with_overrides({"ekf": {"tie_blind_entries": False}}))
+    for f in frames[:3]:
+        off.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
+    for i in off.ekf.landmark_ids:
+        off.ekf.remove_landmark(i)
+    rec = off.step(frames[3].stamp, frames[3].left, frames[3].right, odometry=frames[3].odometry,
+                   pan=frames[3].pan).record
+    assert rec.new and not rec.landmark_couplings

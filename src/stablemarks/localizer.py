@@ -160,7 +160,8 @@ class FrameRecord:
     """The update's observations: ``(landmark id, u_l, u_r)`` [px], each with noise ``noise.sigma_img``."""
     landmark_priors: list[tuple[list[int], list[float], np.ndarray]] = field(default_factory=list)
     """Landmarks entered in this frame, in groups: ``(ids, initial state values, joint covariance)``; the
-    cross-covariance with the pose is zero for wall landmarks (DESIGN §4)."""
+    cross-covariance with the pose is zero for wall landmarks (DESIGN §4) unless the group is tied to the pose
+    (:attr:`landmark_couplings`)."""
     landmark_couplings: list[tuple[list[int], list[list[float]], list[float]]] = field(default_factory=list)
     """Groups of :attr:`landmark_priors` entered tied to the pose (``ekf.tie_blind_entries``): ``(ids, G (n, 3),
     X)``, their errors ``G (X_true − X)`` plus the prior's; the filter held ``cov + G P_XX Gᵀ`` with cross-covariance
@@ -198,6 +199,9 @@ class FrameRecord:
             "measurements": [list(m) for m in self.measurements],
             "landmark_priors": [{"ids": ids, "values": vals, "cov": np.asarray(cov).tolist()}
                                 for ids, vals, cov in self.landmark_priors],
+            "landmark_couplings": [{"ids": ids, "G": G, "pose": X} for ids, G, X in self.landmark_couplings],
+            "wall_measurements": [{"plane": p, "nu": nu, "H": H, "J_bias": J, "R": R, "var_bias": v, "pose": X}
+                                  for p, nu, H, J, R, v, X in self.wall_measurements],
             "candidates": self.candidates, "boundaries": self.boundaries,
         }
 

@@ -34,7 +34,7 @@ class Entered:
 
     ``ids`` the new landmark ids in order; ``candidates`` the wall candidate each came from (None for point
     landmarks); ``priors`` the groups ``(ids, initial values, joint covariance)`` they entered with (wall
-    landmarks; the cross-covariance with the pose is zero, DESIGN §4).
+    landmarks; the cross-covariance with the pose is zero, DESIGN §4, unless the group is in ``couplings``).
     """
 
     ids: list[int] = field(default_factory=list)

@@ -9,7 +9,7 @@ import stablemarks as sm
 from stablemarks.estimation import JointEKF, NewLandmark
 from stablemarks.geometry import StereoCamera
 from stablemarks.maps import ReferencePlane
-from stablemarks.methods import along_wall_jacobian
+from stablemarks.methods import along_wall_jacobian, ray_on_wall
 from stablemarks.sim.export import write_simulated_sequence
 from stablemarks.sim.run import simulate_run
 
@@ -33,6 +33,11 @@ def test_the_rays_hit_point_moves_along_the_wall_with_the_pose(edge):
     assert G[1, 1] == pytest.approx(-sign * slope[1], rel=1e-3)
     # turning left by δ moves the hit point of the central ray to the left by about its range
     assert G[0, 2] == pytest.approx(-sign * Zc, rel=0.1)
+    # the hit point itself: measured from either end, the two distances make the wall's length, and a column
+    # further right hits further right
+    s = ray_on_wall(cam, X0, WALL, edge, u)
+    np.testing.assert_allclose(s + ray_on_wall(cam, X0, WALL, "p2" if edge == "p1" else "p1", u), WALL.length)
+    assert sign * (s[1] - s[0]) > 0
 
 
 def _observed_again(tied: bool):
@@ -76,10 +81,20 @@ def test_a_frame_that_finds_no_landmark_enters_its_new_ones_tied(lab_scenario, t
     # the next frame finds none of the filter's landmarks (all dropped, as after a long blind stretch)
     for i in loc.ekf.landmark_ids:
         loc.ekf.remove_landmark(i)
-    rec = loc.step(frames[3].stamp, frames[3].left, frames[3].right, odometry=frames[3].odometry,
-                   pan=frames[3].pan).record
+    est = loc.step(frames[3].stamp, frames[3].left, frames[3].right, odometry=frames[3].odometry, pan=frames[3].pan)
+    rec = est.record
     assert rec.new and not rec.observed
     assert sorted(i for ids, _, _ in rec.landmark_couplings for i in ids) == sorted(rec.new)
+    # each where its line's ray from the pose meets the mapped wall, not at its distance from the boundary
+    cam = seq.camera.with_pan(frames[3].pan)
+    for (ids, G, X), (ids2, values, _) in zip(rec.landmark_couplings, rec.landmark_priors, strict=True):
+        assert ids == ids2
+        cands = [c for c, i in zip(est.entered.candidates, est.entered.ids, strict=True) if i in ids]
+        plane = seq.world_map[cands[0].plane_id]
+        np.testing.assert_allclose(values, ray_on_wall(cam, X, plane, cands[0].edge, [c.u_left for c in cands]),
+                                   atol=1e-9)
+        np.testing.assert_allclose(G, along_wall_jacobian(cam, X, plane, cands[0].edge, [c.u_left for c in cands]),
+                                   atol=1e-9)
     P = loc.ekf.cov
     assert np.abs(P[:3, 3:]).max() > 0  # cross-covariance with the pose
     assert_psd(P)

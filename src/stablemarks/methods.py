@@ -188,24 +188,26 @@ def method_named(name: str) -> Method:
 # ------------------------------------------------------------------ entering landmarks
 def along_wall_jacobian(camera: StereoCamera, X, plane, edge: str, u_left) -> np.ndarray:
     """``G = ∂s/∂X`` (n, 3): how the point where the left camera's ray through column ``u_left`` (n,) meets the
-    wall moves along it (``s`` from ``edge``) with the pose, by central differences."""
-    t = plane.direction if edge == "p1" else -plane.direction
-    u = np.atleast_1d(np.asarray(u_left, dtype=float))
-
-    def s_of(Xp):
-        c = camera.from_camera(Xp, np.zeros_like(u), np.zeros_like(u))
-        d = camera.from_camera(Xp, (u - camera.cu) / camera.f, np.ones_like(u)) - c
-        # c + λ d = P1 + s t  →  λ from the normal, s along t
-        n = plane.normal
-        lam = ((np.asarray(plane.P1) - c) @ n) / (d @ n)
-        return (c + lam[:, None] * d - plane.point_at(0.0, edge)) @ t
-
-    G = np.empty((len(u), 3))
+    wall moves along it (``s`` from ``edge``) with the pose, by central differences (:func:`ray_on_wall`)."""
+    G = np.empty((len(np.atleast_1d(u_left)), 3))
     for i, h in enumerate((1e-4, 1e-4, 1e-5)):
         e = np.zeros(3)
         e[i] = h
-        G[:, i] = (s_of(np.asarray(X, dtype=float) + e) - s_of(np.asarray(X, dtype=float) - e)) / (2 * h)
+        G[:, i] = (ray_on_wall(camera, np.asarray(X, dtype=float) + e, plane, edge, u_left)
+                   - ray_on_wall(camera, np.asarray(X, dtype=float) - e, plane, edge, u_left)) / (2 * h)
     return G
+
+
+def ray_on_wall(camera: StereoCamera, X, plane, edge: str, u_left) -> np.ndarray:
+    """``s`` (n,) [m from ``edge``] where the left camera's ray through column ``u_left`` (n,), from the pose
+    ``X``, meets the wall's line."""
+    t = plane.direction if edge == "p1" else -plane.direction
+    u = np.atleast_1d(np.asarray(u_left, dtype=float))
+    c = camera.from_camera(X, np.zeros_like(u), np.zeros_like(u))
+    d = camera.from_camera(X, (u - camera.cu) / camera.f, np.ones_like(u)) - c
+    n = plane.normal
+    lam = ((np.asarray(plane.P1) - c) @ n) / (d @ n)  # c + λ d on the wall's line
+    return (c + lam[:, None] * d - plane.point_at(0.0, edge)) @ t
 
 
 def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
@@ -215,10 +217,11 @@ def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
     candidate's error model (the fitted line and the boundary shared; see :class:`~stablemarks.landmarks.Candidate`),
     or ``σ_b² 11ᵀ + diag(σ_f²)`` for candidates without one (DESIGN §4).
 
-    With ``tied_camera`` (the frame's panned camera) the group is entered tied to the pose: its error is taken to be
-    ``G δX`` (:func:`along_wall_jacobian`, the pose's error carried along the rays to the wall) plus ``Σ``, so the
-    filter holds ``Σ + G P_XX Gᵀ`` with cross-covariance ``P_XX Gᵀ``, as a SLAM filter enters what it measures from
-    an uncertain pose. Seen again from about the same place such landmarks then tell the pose little until a
+    With ``tied_camera`` (the frame's panned camera) the group is entered as a SLAM filter enters what it measures
+    from an uncertain pose: each landmark where its line's ray from the pose meets the mapped wall
+    (:func:`ray_on_wall`), its error the pose's carried along the rays, ``G δX`` (:func:`along_wall_jacobian`), and
+    the column's, ``σ_img ∂s/∂u``: the filter holds ``diag(σ²) + G P_XX Gᵀ`` with cross-covariance ``P_XX Gᵀ``.
+    Seen again from about the same place such landmarks then tell the pose little until a
     landmark entered otherwise is seen with them; entered independent of the pose, two landmarks modelled from a
     wrong boundary would pull the pose onto it with the confidence of a right one.
 
@@ -245,16 +248,25 @@ def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
                 sb = group[0].sigma_b_measured
             sf = np.array([c.sigma_f for c in group])
             cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
-        new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
+        values = [float(c.s) for c in group]
         if tied_camera is not None:
+            # measured from the pose, as SLAM does: where the line's ray meets the mapped wall, with the pose's
+            # error G δX and the column's (σ_img along the ray) — not from the boundary, which the pose alone chose
             X = ekf.pose
-            G = along_wall_jacobian(tied_camera, X, plane, edge, [c.u_left for c in group])
+            u = np.array([c.u_left for c in group], dtype=float)
+            values = ray_on_wall(tied_camera, X, plane, edge, u).tolist()
+            G = along_wall_jacobian(tied_camera, X, plane, edge, u)
+            du = (ray_on_wall(tied_camera, X, plane, edge, u + 0.5) - ray_on_wall(tied_camera, X, plane, edge, u - 0.5))
+            cov = np.diag((du * float(tied_camera.sigma_img)) ** 2)
+            new = [NewLandmark.wall(plane, v, edge, c.z_low, c.z_high, polarity.get(c.pair, 0))
+                   for v, c in zip(values, group, strict=True)]
             P_XX = ekf.cov_pose
             added = ekf.add_landmarks(new, cov + G @ P_XX @ G.T, cov_pose_new=P_XX @ G.T, frame=frame)
             out.couplings.append((added, G, X))
         else:
+            new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
             added = ekf.add_landmarks(new, cov, frame=frame)
-        out.priors.append((added, [float(c.s) for c in group], cov))
+        out.priors.append((added, values, cov))
         out.ids += added
         out.candidates += group
     return out

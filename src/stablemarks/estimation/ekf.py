@@ -146,11 +146,12 @@ class EKFConfig:
         0.38 → 1.93): the walls' remaining errors (their tilt, the clutter in front of them) are not all in the
         model yet.
     tie_blind_entries : landmarks entered in a frame that found none of the filter's landmarks (after the first
-        frame that did) enter tied to the pose (:func:`~stablemarks.methods.enter_wall_landmarks`): the boundary
-        they are measured from was told from other lines by the pose alone, so they carry its error, with the
-        cross-covariance a SLAM filter gives what it measures. Entered independent of the pose after a blind
-        stretch (heading σ 6°), two landmarks modelled from a white board's end found on a coat stand's pole
-        pulled the pose 0.2 m off with σθ 0.9° (pose NEES 36, ``benchmarks/independent_sequence.py office``).
+        frame that did) enter as SLAM enters what it measures (:func:`~stablemarks.methods.enter_wall_landmarks`):
+        where the line's ray from the pose meets the mapped wall, with the cross-covariance to the pose that
+        implies, not at their distance from a boundary the pose alone told apart from other lines. Entered from
+        the boundary after a blind stretch (heading σ 6°), two landmarks modelled from a white board's end found
+        on a coat stand's pole pulled the pose 0.2 m off with σθ 0.9° (pose NEES 36,
+        ``benchmarks/independent_sequence.py office``).
     """
 
     gate_probability: float = 0.99

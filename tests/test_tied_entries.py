@@ -1,6 +1,7 @@
-"""Landmarks entered in a frame that found none of the filter's landmarks are tied to the pose
-(``ekf.tie_blind_entries``): their boundary was told from other lines by the pose alone, so they enter with the
-cross-covariance to the pose their image positions imply, as a SLAM filter enters what it measures."""
+"""Landmarks entered in a frame that found none of the filter's landmarks, tied to the pose (``ekf.tie_blind_entries``,
+off by default): their boundary was told from other lines by the pose alone, so they enter where their rays from the
+pose meet the mapped wall, with the cross-covariance to the pose that implies, as a SLAM filter enters what it
+measures."""
 
 import numpy as np
 import pytest
@@ -74,7 +75,8 @@ def test_a_frame_that_finds_no_landmark_enters_its_new_ones_tied(lab_scenario, t
     seq = sm.open_sequence(write_simulated_sequence(simulate_run(lab_scenario, seed=4), tmp_path / "lab",
                                                     n_frames=6))
     frames = list(seq)
-    loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=sm.Config())
+    on = sm.Config().with_overrides({"ekf": {"tie_blind_entries": True}})
+    loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=on)
     for f in frames[:3]:
         rec = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan).record
         assert not rec.landmark_couplings  # the first frame's are the map's: not tied
@@ -98,9 +100,8 @@ def test_a_frame_that_finds_no_landmark_enters_its_new_ones_tied(lab_scenario, t
     P = loc.ekf.cov
     assert np.abs(P[:3, 3:]).max() > 0  # cross-covariance with the pose
     assert_psd(P)
-    # switched off, the same frame enters them independent of the pose
-    off = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose,
-                       config=sm.Config().with_overrides({"ekf": {"tie_blind_entries": False}}))
+    # off (the default), the same frame enters them independent of the pose
+    off = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=sm.Config())
     for f in frames[:3]:
         off.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
     for i in off.ekf.landmark_ids:

@@ -14,7 +14,7 @@ the README's "Configuration" block shows more of them)::
     planes:    {gate_sigma: 3.0, min_pixels: 300, disparity_bias_px: 0.0, fit_covariance: clustered}
     landmarks: {boundary_sigma: 3.0, min_length_similarity: 0.7, min_contrast: 30, max_range: 12.0,
                 max_incidence_deg: 60.0, boundary_gate_sigma: 3.0}           # m, deg
-    ekf:       {max_updates_per_frame: 6, edge_updates: false, wall_updates: false, tie_blind_entries: true}
+    ekf:       {max_updates_per_frame: 6, edge_updates: false, wall_updates: false, tie_blind_entries: false}
     health:    {blind_frames: 10, drift_sigma: 4.0}
 
 The noise values are measured (``stablemarks calibrate-noise``), not the paper's; ``Config.preset("paper")``

@@ -3,8 +3,9 @@
 For each scenario, simulates its run (`stablemarks simulate`, the scenario's seed or --seed), writes the clean
 sequence and the edited ones, runs `stablemarks run` on each and prints one line per run: the ATE against dead
 reckoning's [mm], the first `warning:` line's frame and condition, the frame of the first one that names the
-pan, the final position NEES (2 dof, 99 % bound 9.21), the ATE from three frames after the jump against dead
-reckoning's, and the number of warning lines.
+pan (0 for the warning before the first frame that the recording gives no pans), the final position NEES (2 dof,
+99 % bound 9.21), the ATE from three frames after the jump against dead reckoning's, and the number of warning
+lines.
 
 Faults: `kidnap` (+0.5 m in the odometry's y after frame 10), `kidnap-x` (+0.5 m in x), `kidnap-neg` (−0.5 m in
 y), `kidnap25` (+0.5 m in y after frame 25), `pan` (every recorded pan +0.2 rad), `nopan` (the pan column left
@@ -79,6 +80,8 @@ def run_one(seq: Path, out: Path, jump: int | None, config: str | None = None) -
     lines = err.getvalue().splitlines()
     warnings = [line for line in lines if line.startswith("warning:")]
     first = next((line for line in warnings if line.startswith("warning: frame")), None)
+    # the pan named: before the first frame (a recording without pans: frame 0) or by a health condition
+    upfront = any("no pan recorded" in line for line in warnings)
     pan = next((line for line in warnings if line.startswith("warning: frame") and "pan" in line), None)
     log = [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
     est, truth, dr = (np.array([r[k] for r in log]) for k in ("pose", "true_pose", "dead_reckoning"))
@@ -88,7 +91,7 @@ def run_one(seq: Path, out: Path, jump: int | None, config: str | None = None) -
     after = slice((jump or 0) + 3, None)
     return {"ate": float(np.sqrt(np.mean(e**2))), "ate_dr": float(np.sqrt(np.mean(e_dr**2))),
             "first": None if first is None else (int(first.split()[2]), first.split(": ")[2]),
-            "pan_named": None if pan is None else int(pan.split()[2]),
+            "pan_named": 0 if upfront else None if pan is None else int(pan.split()[2]),
             "nees_position": float(r @ np.linalg.solve(np.array(log[-1]["cov_pose"])[:2, :2], r)),
             "ate_after": float(np.sqrt(np.mean(e[after] ** 2))),
             "ate_dr_after": float(np.sqrt(np.mean(e_dr[after] ** 2))),

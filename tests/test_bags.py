@@ -249,6 +249,7 @@ def test_pan_from_joint_states_and_the_mounts_pan_without_a_topic(tmp_path, inpu
     path = write_bag(tmp_path / "joints", lab_messages(pan="joint"))
     with open_lab_bag(path, inputs, pan_joint="pan") as source:
         np.testing.assert_allclose(source.pans, run.pans[:N_FRAMES], atol=1e-12)
+        assert source.pan_recorded
     with pytest.raises(SequenceError, match=r"/head/pan: joint states of several joints \(tilt, pan\): pass "
                                             r"`pan_joint`"):
         open_lab_bag(path, inputs)
@@ -257,6 +258,7 @@ def test_pan_from_joint_states_and_the_mounts_pan_without_a_topic(tmp_path, inpu
     path = write_bag(tmp_path / "nopan", lab_messages(pan=None))
     with open_lab_bag(path, inputs, pan_topic=None) as source:
         assert list(source.pans) == [0.0] * N_FRAMES
+        assert not source.pan_recorded  # `stablemarks run` warns (unless pan.policy is fixed)
 
 
 def test_run_on_a_bag_equals_the_run_on_our_folder(tmp_path, inputs):

@@ -271,3 +271,20 @@ def test_landmarks_entered_under_a_wrong_pan_are_no_witness_of_a_slip(tmp_path, 
     ate = np.sqrt(np.mean(np.sum((np.array([r["pose"] for r in log])[:, :2] - truth) ** 2, axis=1)))
     ate_dr = np.sqrt(np.mean(np.sum((np.array([r["dead_reckoning"] for r in log])[:, :2] - truth) ** 2, axis=1)))
     assert ate <= 1.05 * ate_dr
+
+
+def test_a_recording_without_pans_is_named_before_the_first_frame(lab_seq, tmp_path, capsys):
+    """frames.csv without its pan column while the pan policy says the head moves: one `warning:` line before the
+    first frame names the pan column and --pan-topic, and the end-of-run summary repeats it; a head declared
+    fixed (`pan.policy: fixed`) and a sequence with its pans recorded get none of it."""
+    from stablemarks.io.sequence import load_sequence
+
+    seq = drop_pan_column(lab_seq, tmp_path / "nopan")
+    assert not load_sequence(seq).pan_recorded and load_sequence(lab_seq).pan_recorded
+    assert main(["run", str(seq), "--out", str(tmp_path / "a"), "--no-figures"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    up_front = [line for line in err if line.startswith("warning: lab: no pan recorded")]
+    assert len(up_front) == 1 and "pan column" in up_front[0] and "--pan-topic" in up_front[0]
+    assert any(line.startswith("warning: pan_unrecorded held") for line in err)
+    assert main(["run", str(seq), "--out", str(tmp_path / "b"), "--no-figures", "--set", "pan.policy=fixed"]) == 0
+    assert "no pan recorded" not in capsys.readouterr().err

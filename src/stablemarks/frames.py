@@ -63,6 +63,11 @@ class FrameSource(Protocol):
         (a simulated robot's odometry noise and pan policy); :meth:`stablemarks.Config.with_source_defaults`
         lets them fill what the user's configuration leaves at its default. Empty for most recordings.
     notes : sentences for the user about what was left out of the input.
+
+    A source may also say whether each frame's pan was recorded (``pan_recorded``, True when absent): False
+    when every frame is given the mount's pan because the recording has none (a ``frames.csv`` without its
+    ``pan`` column, a bag without a pan topic or a moving joint on ``/tf``). ``stablemarks run`` warns then,
+    unless the configuration says the head does not pan (``pan.policy: fixed``).
     """
 
     name: str

@@ -100,6 +100,8 @@ def run(args) -> int:
         config = load_run_config(args, source)
         for note in source.notes:
             console.print(f"note: {note}")
+        if not getattr(source, "pan_recorded", True) and config.pan.policy != "fixed":
+            warned.unrecorded_pan(source)
         default = re.sub(r"[^\w.-]", "_", source.name).lstrip(".") or "run"  # a name is no path
         out = check_out_dir(args.out if args.out else Path("results") / default, inputs=(source_dir,))
         camera = source.camera
@@ -166,6 +168,24 @@ class HealthWarnings:
                 self.first[name] = (frame.index, frame.stamp, message)
                 print(f"warning: frame {frame.index} (stamp {frame.stamp:.3f} s): {for_cli(message, FLAGS)}",
                       file=sys.stderr, flush=True)
+
+    def unrecorded_pan(self, source) -> None:
+        """Warn, before the first frame, that ``source`` gives no pan for its frames (``pan_recorded`` False)
+        while the configuration's pan policy says the head moves: a head that panned unrecorded turns every wall
+        in the image, and the run then follows the odometry."""
+        import math
+        import sys
+
+        what = ("its frames.csv has no pan column" if hasattr(source, "sequence") else
+                "no --pan-topic was given and no joint on /tf moves the head")
+        message = (f"{source.name}: no pan recorded for the frames ({what}): every frame is taken at the mount's "
+                   f"pan, {math.degrees(source.camera.pan):.1f} deg. If the head panned, give each frame's pan (the "
+                   "pan column of frames.csv, or --pan-topic for a bag): with a wrong pan the walls are not found "
+                   "where the pan puts them and the run follows the odometry. If the head does not pan, say so with "
+                   "--set pan.policy=fixed")
+        self.first["pan_unrecorded"] = (0, math.nan, f"pan_unrecorded: {message}")
+        self.frames["pan_unrecorded"] = len(source)
+        print(f"warning: {message}", file=sys.stderr, flush=True)
 
     def summary(self) -> None:
         import sys

@@ -290,7 +290,8 @@ class BagSource(RecordedSource):
         self._left = [(int(bag_left[i]), int(t_left[i])) for i in pairs[:, 0]]
         self._right = [(int(bag_right[j]), int(t_right[j])) for j in pairs[:, 1]]
         super().__init__(name, calibration, camera, world_map, stamps, odometry, pans, start_pose=start_pose,
-                         groundtruth=groundtruth, start_cov=start_cov, notes=notes, sources=sources)
+                         groundtruth=groundtruth, start_cov=start_cov, notes=notes, sources=sources,
+                         pan_recorded=pan_topic is not None or tf_pans is not None)
 
     # -- reading
     def _open(self):

@@ -177,6 +177,8 @@ class RecordedSource:
     start_cov : (3, 3) covariance of ``start_pose`` over x [m], y [m], yaw [rad] when the recording gives one
         (its :attr:`initial_cov`; None: the caller's default).
     notes : sentences for the user about what was left out (frames without odometry, unmatched images).
+    pan_recorded : whether ``pans`` were recorded per frame (a pan topic, a moving joint on /tf); False: every
+        frame has the mount's pan (a head that cannot move, or one whose pan the recording does not give).
     sources : where each input came from, ``{what: where}`` (e.g. ``{"calibration": "camera_info
         /cam/left/camera_info, /cam/right/camera_info"}``), for the run's ``config.yaml``.
 
@@ -187,7 +189,7 @@ class RecordedSource:
 
     def __init__(self, name: str, calibration: StereoCalibration, camera: StereoCamera, world_map: Map,
                  stamps, odometry, pans, *, start_pose=None, groundtruth=None, start_cov=None,
-                 notes: Sequence[str] = (), sources: dict[str, str] | None = None):
+                 notes: Sequence[str] = (), sources: dict[str, str] | None = None, pan_recorded: bool = True):
         self.name = name
         self.calibration = calibration
         self.camera = camera
@@ -211,6 +213,7 @@ class RecordedSource:
             raise InputError(expected("a (3, 3) start covariance", self.initial_cov.shape, where=name))
         self.notes = list(notes)
         self.sources = dict(sources or {})
+        self.pan_recorded = bool(pan_recorded)
 
     # -- the FrameSource protocol
     def __len__(self) -> int:

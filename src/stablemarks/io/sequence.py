@@ -150,6 +150,8 @@ class Sequence:
     truth_path : the simulator's per-frame truth (``groundtruth.json``), or None.
     initial_pose : the robot's start in the map, or None.
     initial_cov : (3, 3) its covariance over ``(x, y, theta)`` [m², rad²], or None.
+    pan_recorded : whether ``frames.csv`` gives each frame's pan (its ``pan`` column); False: every frame has the
+        mount's pan, which is right only if the head did not move.
     """
 
     root: Path
@@ -168,6 +170,7 @@ class Sequence:
     initial_pose: SE2 | None = None
     description: str = ""
     initial_cov: np.ndarray | None = None
+    pan_recorded: bool = True
 
     def __post_init__(self) -> None:
         for name in ("indices", "stamps", "pans", "odometry", "groundtruth"):
@@ -443,7 +446,7 @@ def load_sequence(path: str | Path) -> Sequence:
     seq = Sequence(root, name, camera, calibration, world_map, np.array(indices), stamps, tuple(left),
                    tuple(right), np.array(pans), odometry, groundtruth, truth_path,
                    _initial_pose(meta.get("initial_pose"), source), description,
-                   _initial_cov(meta.get("initial_cov"), source))
+                   _initial_cov(meta.get("initial_cov"), source), pan_recorded=all("pan" in row for _, row in rows))
     with _as_sequence_error():
         seq.frame(0)
     return seq
@@ -642,6 +645,7 @@ class SequenceSource:
         self.initial_pose = None if start_pose is None else np.asarray(start_pose, dtype=float)
         self.initial_cov = sequence.initial_cov
         self.notes: list[str] = []
+        self.pan_recorded = sequence.pan_recorded
 
     def __len__(self) -> int:
         return len(self.sequence)

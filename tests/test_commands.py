@@ -172,6 +172,10 @@ def test_preset_paper_on_run_eval_and_select(rendered, tmp_path, capsys, monkeyp
         main(["eval", "lab", "--trials", "1", "--methods", "dead_reckoning", "--preset", "paper",
               "--out", str(tmp_path / "ev")])
     assert seen[-1].noise.sigma_img == paper and seen[-1].noise.boundary_px is None
+    with pytest.raises(_Stop):  # --set on top of the preset, as for run
+        main(["eval", "lab", "--trials", "1", "--methods", "dead_reckoning", "--preset", "paper",
+              "--set", "noise.sigma_img=0.2", "--out", str(tmp_path / "ev")])
+    assert seen[-1].noise.sigma_img == 0.2 and seen[-1].noise.boundary_px is None
     seen = _capture_config(monkeypatch, "stablemarks.pipeline", "process_frame")
     with pytest.raises(_Stop):
         main(["select", str(rendered / "frame_000000_left.png"), str(rendered / "frame_000000_right.png"),

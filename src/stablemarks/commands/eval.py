@@ -62,6 +62,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="standard deviations of the start pose belief (default 0.05,0.05,1deg)")
     preset_arg(p)
     p.add_argument("--config", metavar="FILE", help="thresholds (YAML, see README), on top of --preset")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override one setting on top of --config, e.g. --set noise.sigma_img=0.1 (repeatable)")
     p.add_argument("--out", default="results/eval", metavar="DIR", help="output folder (default results/eval)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures (report.md without them)")
     p.add_argument("--pan-policy", metavar="P1,P2", default=None,

@@ -100,12 +100,12 @@ def run(args) -> int:
         config = load_run_config(args, source)
         for note in source.notes:
             console.print(f"note: {note}")
-        if not getattr(source, "pan_recorded", True) and config.pan.policy != "fixed":
-            warned.unrecorded_pan(source)
         default = re.sub(r"[^\w.-]", "_", source.name).lstrip(".") or "run"  # a name is no path
         out = check_out_dir(args.out if args.out else Path("results") / default, inputs=(source_dir,))
         camera = source.camera
         check_image_settings(config, camera.width, camera.height, f"the images of {source.name}")
+        if not getattr(source, "pan_recorded", True) and config.pan.policy != "fixed":  # after the input checks
+            warned.unrecorded_pan(source)
         localizer = Localizer(source.world_map, source.camera, start_pose=source.initial_pose,
                               start_cov=start_cov, config=config, method=args.method, prior_landmarks=prior)
         rrd = None

@@ -228,8 +228,9 @@ def test_convert_then_run_the_folder_equals_run_on_the_bag(tmp_path, inputs, cap
     np.testing.assert_array_equal(t_bag, t_dir)
     np.testing.assert_allclose(p_bag, p_dir, rtol=0, atol=1e-9)
     np.testing.assert_allclose(read_tum(from_folder / "groundtruth.tum")[1], lab_truth(), rtol=0, atol=1e-9)
-    # the bag run warned that the bag gives no pan (no --pan-topic): read, before the errors below
-    assert "no pan recorded" in capsys.readouterr().err
+    # the bag gives no pan (no --pan-topic): the folder says so too (no pan column), and both runs warn of it
+    assert "pan" not in (folder / "frames.csv").read_text().splitlines()[0].split(",")
+    assert capsys.readouterr().err.count("warning: pan_unrecorded held") == 2
     # --out is checked before any work, and an existing folder is not replaced without --force.
     err = cli_error(capsys, "convert", bag, *TOPICS, "--map", inputs["map"], "--out", folder)
     assert err.startswith("stablemarks convert: error: ") and "not empty" in err

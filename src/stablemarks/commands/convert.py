@@ -71,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
             written = write_sequence(
                 out, name=source.name, description=f"converted by stablemarks convert from {args.source}",
                 camera=source.camera, calibration=source.calibration, world_map=source.world_map,
-                stamps=source.stamps, odometry=source.odometry_poses, pans=source.pans, images=images(),
+                stamps=source.stamps, odometry=source.odometry_poses,
+                pans=source.pans if getattr(source, "pan_recorded", True) else None, images=images(),
                 groundtruth=truth, initial_pose=SE2.from_array(source.initial_pose), force=args.force,
                 initial_cov=getattr(source, "initial_cov", None))
     files = ["sequence.yaml", "calib/", "map.yaml", "left/", "right/", "frames.csv", "odometry.csv"]

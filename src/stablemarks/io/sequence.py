@@ -529,7 +529,8 @@ def write_sequence(
     world_map : written as ``map.yaml``.
     stamps : (n,) frame times [s], strictly increasing.
     odometry : (n, 3) wheel-odometry poses ``(x [m], y [m], theta [rad])`` at the frame stamps.
-    pans : (n,) head pan of each frame [rad].
+    pans : (n,) head pan of each frame [rad], or None: not recorded, ``frames.csv`` gets no ``pan`` column and
+        every frame has the mount's pan (what a recording without pans gives; ``run`` warns of it).
     images : n pairs ``(left, right)`` of (H, W[, C]) images, consumed one at a time (e.g. a generator
         that renders them), written as PNG.
     calibration : the raw camera's calibration when the images are raw; None writes the ideal rectified
@@ -547,7 +548,7 @@ def write_sequence(
     stamps = np.asarray(stamps, dtype=float)
     n = len(stamps)
     odometry = np.asarray(odometry, dtype=float)
-    pans = np.asarray(pans, dtype=float)
+    pans = None if pans is None else np.asarray(pans, dtype=float)
     if stamps.ndim != 1 or n == 0 or not np.all(np.isfinite(stamps)) or np.any(np.diff(stamps) <= 0):
         raise InputError("stamps: expected (n,) finite, strictly increasing stamps with n >= 1")
     for what, value, shape in (("odometry", odometry, (n, 3)), ("pans", pans, (n,)),
@@ -602,9 +603,9 @@ def _write_contents(tmp: Path, name, description, camera, world_map, stamps, odo
         raise InputError(f"images: expected {n} stereo pairs, one per stamp, got {count}")
 
     (tmp / "frames.csv").write_text(_csv_text(
-        (*_FRAME_COLUMNS, "pan"),
-        ((k, f"{stamps[k]:.9f}", image_name("left", k), image_name("right", k), repr(float(pans[k])))
-         for k in range(n))))
+        (*_FRAME_COLUMNS, "pan") if pans is not None else _FRAME_COLUMNS,
+        ((k, f"{stamps[k]:.9f}", image_name("left", k), image_name("right", k),
+          *(() if pans is None else (repr(float(pans[k])),))) for k in range(n))))
     (tmp / "odometry.csv").write_text(_csv_text(
         _ODOMETRY_COLUMNS, ((f"{stamps[k]:.9f}", *(repr(float(v)) for v in odometry[k])) for k in range(n))))
 

@@ -14,6 +14,10 @@ def test_lines_per_task_and_resume(tmp_path, capsys):
     lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("lab ")]
     assert len(lines) == 4 and all("ATE" in line and line.rstrip().endswith("/4)") for line in lines)
     first = [json.loads(x) for x in (out / "trials.jsonl").read_text().splitlines()]
+    # each line's seconds are its task's own: its frames' time, whatever else ran meanwhile
+    for line, r in zip(lines, first, strict=True):
+        seconds = f"{r['time_per_frame'] * r['frames']:.1f} s"
+        assert f"trial {r['trial']}:" in line and line.split(", ")[-1].startswith(seconds)
     # an interruption after the first task: only its line is kept, and --resume runs the other three
     (out / "trials.jsonl").write_text(json.dumps(first[0]) + "\n" + '{"torn')
     assert main(argv + ["--trials", "2", "--resume"]) == 0

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import stablemarks as sm
-from stablemarks.errors import InputError
+from stablemarks.errors import ConfigError, InputError
 from stablemarks.estimation import JointEKF, NewLandmark
 from stablemarks.geometry import StereoCamera
 from stablemarks.maps import ReferencePlane
@@ -146,3 +146,25 @@ def test_a_run_with_wall_updates_estimates_each_walls_shared_error(lab_seq):
     # and the pose across the walls is known better than from the landmarks alone
     assert np.linalg.det(loc.ekf.cov_pose) < np.linalg.det(runs[False].ekf.cov_pose)
     assert not runs[False].ekf._aux
+
+
+def test_walls_update_only_while_they_tell_the_pose_something(lab_seq):
+    """``ekf.wall_info_ratio``: a wall updates the pose only while the pose's variance across it is at least that
+    many times the fit's, in any frame; the first form (ratio 0) updated from every wall, only in frames with a
+    pattern of landmarks. With 1 the lab's run uses fewer walls, also in a frame without such a pattern; a ratio
+    no wall reaches uses none."""
+    seq = sm.open_sequence(lab_seq)
+    used = {}
+    for ratio in (0.0, 1.0, 1e6):
+        config = sm.Config().with_overrides({"ekf": {"wall_updates": True, "wall_info_ratio": ratio},
+                                             "planes": {"disparity_bias_px": 0.03}})
+        loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=config)
+        used[ratio] = [len(loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan).record.wall_measurements)
+                       for f in seq]
+        assert_psd(loc.ekf.cov)
+    # also in a frame without a pattern of landmarks, where the first form used none
+    assert any(a > 0 and b == 0 for a, b in zip(used[1.0], used[0.0], strict=True))
+    assert sum(used[1.0]) < sum(used[0.0])  # informative walls only
+    assert sum(used[1e6]) == 0
+    with pytest.raises(ConfigError, match="wall_info_ratio"):
+        sm.Config().with_overrides({"ekf": {"wall_info_ratio": -1}})

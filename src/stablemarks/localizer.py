@@ -705,7 +705,8 @@ class Localizer:
         offset's error at the true pose is correlated 0.2–0.7 over 20 frames), so it is a state of the filter,
         one per wall (:meth:`JointEKF.add_aux`, prior σ ``planes.disparity_bias_px``), not noise counted anew in
         every frame: seeing a wall again from the same place adds nothing the first view did not give. Only walls
-        used in the frame (not gated), jointly within the 99 % χ² bound, and not the walls new landmarks were
+        used in the frame (not gated), jointly within the 99 % χ² bound, informative (``ekf.wall_info_ratio``: the
+        pose's variance across the wall at least that many times the fit's), and not the walls new landmarks were
         modelled on in this frame (their positions come from the same fit: used twice, the pose and those
         landmarks would seem independent). Returns the measurements used (:attr:`FrameRecord.wall_measurements`)."""
         used = {c.plane_id for c in entered.candidates if c is not None}
@@ -715,9 +716,13 @@ class Localizer:
         cov_map = self.world_map.accuracy_cov
         var_beta = float(self.config.planes.disparity_bias_px) ** 2
         X = self.ekf.pose
+        ratio = float(self.config.ekf.wall_info_ratio)
+        P_XX = self.ekf.cov_pose
         measurements = []
         for f in fits:
             J = seen_wall_jacobian(cam_k, f)
+            if ratio > 0 and float(J[0] @ P_XX @ J[0]) < ratio * float(np.asarray(f.cov_R)[0, 0]):
+                continue  # the pose already knows its distance from this wall as well as the fit says it
             dX = np.asarray(f.X, dtype=float) - X
             dX[2] = wrap_angle(dX[2])
             R = np.asarray(f.cov_R, dtype=float) + cov_map
@@ -727,6 +732,8 @@ class Localizer:
             measurements.append((f.plane.id, (np.array([f.a, f.b]) - J @ dX).tolist(), (-J).tolist(),
                                  np.asarray(f.J_bias, dtype=float).tolist() if shared else None, R.tolist(), var_beta,
                                  X.tolist()))
+        if not measurements:
+            return []
         nu, H, keys, H_aux, R = _wall_terms(measurements)
         idx = [0, 1, 2] + [self.ekf.aux_index(k) for k in keys]
         known = [i for i in idx if i is not None]
@@ -1007,8 +1014,10 @@ class Localizer:
             if not pan_suspect and not recovering and self.config.ekf.edge_updates and model is not None \
                     and len(record.observed) >= self.config.health.min_pattern and not self.health.active:
                 record.edge_measurements = self._update_edges(model, entered, record.measurements, pan)
+            informative = self.config.ekf.wall_info_ratio > 0  # walls while they tell the pose something, any frame
             if not pan_suspect and not recovering and self.config.ekf.wall_updates and model is not None \
-                    and len(record.observed) >= self.config.health.min_pattern and not self.health.active:
+                    and (informative or len(record.observed) >= self.config.health.min_pattern) \
+                    and not self.health.active:
                 record.wall_measurements = self._update_walls(model, entered, cam_k)
             timings["select"] = time.perf_counter() - t3
         drift = None

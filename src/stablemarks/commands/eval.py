@@ -158,8 +158,8 @@ def run(args) -> int:
             if plain:
                 now = time.perf_counter()
                 ate = "failed" if res.get("error") is not None else f"ATE {res['ate_rmse']:.4f} m"
-                # the task's own time (its frames' processing); with parallel jobs the time since the line
-                # before says nothing about it
+                # the task's own time (the method's work on its frames, time_per_frame × frames, rendering left
+                # out); with parallel jobs the time since the line before says nothing about it
                 per_frame, frames = res.get("time_per_frame"), res.get("frames")
                 secs = per_frame * frames if per_frame is not None and frames else now - last[0]
                 print(f"{res['scenario']} {res['method']} trial {res['trial']}: {ate}, {secs:.1f} s "

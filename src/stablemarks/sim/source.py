@@ -40,6 +40,7 @@ class SimulatedSource:
         self.renderer = renderer or renderer_for(run.scenario)
         self.stamp_step = stamp_step
         self.notes: list[str] = []
+        self.pan_recorded = True  # every frame's pan is the simulated head's
         self.rendering = True
         self._n = len(run) if frames is None else min(int(frames), len(run))
         self._pan_for: Callable[[np.ndarray], float] | None = None

@@ -19,3 +19,8 @@ def test_median_is_numpys_bit_for_bit(n):
     for x in cases:
         assert median(x) == np.median(x)
     assert median(np.float32([3, 1, 2, 7])) == np.median(np.float32([3, 1, 2, 7]))
+
+
+def test_median_of_a_2d_array_is_numpys():
+    x = np.random.default_rng(0).normal(size=(7, 5))
+    assert median(x) == np.median(x) and median(x.astype(np.float32)) == np.median(x.astype(np.float32))

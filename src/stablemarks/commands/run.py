@@ -176,9 +176,8 @@ class HealthWarnings:
         import math
         import sys
 
-        what = ("its frames.csv has no pan column" if hasattr(source, "sequence") else
-                "no --pan-topic was given and no joint on /tf moves the head")
-        message = (f"{source.name}: no pan recorded for the frames ({what}): every frame is taken at the mount's "
+        message = (f"{source.name}: no pan recorded for the frames (a frames.csv without its pan column, or a bag "
+                   "without --pan-topic and without a moving joint on /tf): every frame is taken at the mount's "
                    f"pan, {math.degrees(source.camera.pan):.1f} deg. If the head panned, give each frame's pan (the "
                    "pan column of frames.csv, or --pan-topic for a bag): with a wrong pan the walls are not found "
                    "where the pan puts them and the run follows the odometry. If the head does not pan, say so with "

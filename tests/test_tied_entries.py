@@ -109,3 +109,41 @@ def test_a_frame_that_finds_no_landmark_enters_its_new_ones_tied(lab_scenario, t
     rec = off.step(frames[3].stamp, frames[3].left, frames[3].right, odometry=frames[3].odometry,
                    pan=frames[3].pan).record
     assert rec.new and not rec.landmark_couplings
+
+
+def test_widened_blind_entries_hold_the_poses_uncertainty_without_following_it(lab_scenario, tmp_path):
+    """``ekf.widen_blind_entries``: a frame that finds none of the filter's landmarks enters its new ones at their
+    distance from the boundary (as the map's), but as uncertain along the wall as the pose is there (``+ G P_XX
+    Gᵀ``: the boundary may be any line the pose let through), with no cross-covariance to the pose."""
+    seq = sm.open_sequence(write_simulated_sequence(simulate_run(lab_scenario, seed=4), tmp_path / "lab",
+                                                    n_frames=6))
+    frames = list(seq)
+    on = sm.Config().with_overrides({"ekf": {"widen_blind_entries": True}})
+    off = sm.Config()
+    recs = {}
+    for name, cfg in (("on", on), ("off", off)):
+        loc = sm.Localizer(seq.world_map, seq.camera, start_pose=seq.initial_pose, config=cfg)
+        for f in frames[:3]:
+            loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan)
+        for i in loc.ekf.landmark_ids:
+            loc.ekf.remove_landmark(i)
+        est = loc.step(frames[3].stamp, frames[3].left, frames[3].right, odometry=frames[3].odometry,
+                       pan=frames[3].pan)
+        assert est.record.new and not est.record.observed and not est.record.landmark_couplings
+        P = loc.ekf.cov
+        assert_psd(P)
+        np.testing.assert_array_equal(P[:3, 3:], 0.0)
+        recs[name] = est
+    on_est, off_est = recs["on"], recs["off"]
+    cam = seq.camera.with_pan(frames[3].pan)
+    on_priors, off_priors = on_est.record.landmark_priors, off_est.record.landmark_priors
+    assert [ids for ids, _, _ in on_priors] == [ids for ids, _, _ in off_priors]
+    for (ids, values, cov), (_, values_off, cov_off) in zip(on_priors, off_priors, strict=True):
+        np.testing.assert_array_equal(values, values_off)  # the same places
+        cands = [c for c, i in zip(on_est.entered.candidates, on_est.entered.ids, strict=True) if i in ids]
+        plane = seq.world_map[cands[0].plane_id]
+        # the predicted pose of that frame (the filter's before its update: none happened)
+        X = on_est.record.pose
+        G = along_wall_jacobian(cam, X, plane, cands[0].edge, [c.u_left for c in cands])
+        np.testing.assert_allclose(cov, np.asarray(cov_off) + G @ on_est.record.cov_pose @ G.T, rtol=1e-9,
+                                   atol=1e-12)

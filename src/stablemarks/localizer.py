@@ -36,6 +36,7 @@ from .config import Config
 from .errors import InputError, expected
 from .estimation import JointEKF, LandmarkEstimate, motion
 from .estimation.association import lone_gate_px
+from .estimation.consistency import inflate_inconsistent
 from .estimation.relocalize import pose_from_lines
 from .geometry import SE2, StereoCamera, wrap_angle
 from .health import HealthMonitor
@@ -174,6 +175,9 @@ class FrameRecord:
     ``(plane id, innovation ν of (a, b), H = ∂(a, b)/∂X, ∂(a, b)/∂β or None, noise covariance, σ_β², pose of the
     update)``: ``ν ≈ H (X − X_update) + J_β β`` (``β`` the wall's shared disparity error, the filter's auxiliary
     state ``"wall:<id>"``, entered with variance σ_β² when the wall is first used)."""
+    inflated: list[tuple] = field(default_factory=list)
+    """Landmark directions whose variance was raised before this frame's update (``ekf.inflation_p``,
+    :func:`~stablemarks.estimation.consistency.inflate_inconsistent`): ``(ids, t, α [m²], group)``."""
     candidates: list[dict] = field(default_factory=list)
     """Every feature the frame modelled, with its selection decision and, when rejected, the reason
     (:func:`model_log`): so that a rejection, e.g. the edge of an unmapped object in front of a wall ("off the
@@ -416,6 +420,10 @@ class Localizer:
         self._stamp: float | None = None
         self._dt: float | None = None
         self._index = 0
+        self._groups: dict[int, int] = {}
+        """Landmark id → the id of the group it was entered with (one boundary's features of one frame), for
+        :func:`~stablemarks.estimation.consistency.inflate_inconsistent`."""
+        self._n_groups = 0
 
     # ----------------------------------------------------------------- state
     @property
@@ -983,6 +991,10 @@ class Localizer:
             if chosen:
                 pairs = front.kept_pairs
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+                if self.config.ekf.inflation_p > 0 and not recovering:
+                    record.inflated = [(list(f.ids), f.t, f.alpha, f.group) for f in inflate_inconsistent(
+                        self.ekf, [(i, measured[j]) for i, j in chosen], pan, self._groups,
+                        self.config.ekf.inflation_p)]
                 res = self.ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k,
                                       iterations=self.config.ekf.iterations)
                 record.measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen]
@@ -998,9 +1010,14 @@ class Localizer:
                 # a frame that found none of the filter's landmarks enters its new ones tied to the pose
                 # (enter_wall_landmarks): their boundary was told from other lines by the pose alone
                 tied = self.config.ekf.tie_blind_entries and not record.observed and self._observed_once
+                if self.config.ekf.widen_blind_entries and not record.observed and self._observed_once:
+                    tied = "widen"
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
                                        self.config, closed_planes=closed, tied=tied)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
+            for ids_g, _, _ in entered.priors:
+                self._n_groups += 1
+                self._groups.update((int(i), self._n_groups) for i in ids_g)
             self._observed_once = self._observed_once or bool(record.observed)
             record.landmark_couplings = [(ids, np.asarray(G).tolist(), np.asarray(X).tolist())
                                          for ids, G, X in entered.couplings]

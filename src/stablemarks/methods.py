@@ -137,7 +137,7 @@ class Method:
         centre = camera.optical_centres(ekf.pose)[0]
         along = {c.pair: int(wall_polarity(int(polarity[c.pair]), world_map[c.plane_id], centre)) for c in fresh}
         return enter_wall_landmarks(ekf, world_map, fresh, frame, along, config.landmarks.filter_boundary_sigma,
-                                    tied_camera=camera if tied else None)
+                                    tied_camera=camera if tied else None, widen=tied == "widen")
 
 
 class PlaneNoSelection(Method):
@@ -212,7 +212,7 @@ def ray_on_wall(camera: StereoCamera, X, plane, edge: str, u_left) -> np.ndarray
 
 def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
                          polarity: dict[int, int] | None = None, boundary_sigma: str = "model",
-                         tied_camera: StereoCamera | None = None) -> Entered:
+                         tied_camera: StereoCamera | None = None, widen: bool = False) -> Entered:
     """Enter candidates as wall landmarks, jointly per boundary: ``Σ = J Σ_shared Jᵀ + diag(σ_own²)`` from each
     candidate's error model (the fitted line and the boundary shared; see :class:`~stablemarks.landmarks.Candidate`),
     or ``σ_b² 11ᵀ + diag(σ_f²)`` for candidates without one (DESIGN §4).
@@ -249,7 +249,16 @@ def enter_wall_landmarks(ekf: JointEKF, world_map: Map, candidates, frame: int,
             sf = np.array([c.sigma_f for c in group])
             cov = sb**2 * np.ones((len(group), len(group))) + np.diag(sf**2)
         values = [float(c.s) for c in group]
-        if tied_camera is not None:
+        if tied_camera is not None and widen:
+            # the boundary was told from the lines beside it by the pose alone: it may be any of them, so the
+            # group's place along the wall is as uncertain as the pose is along it (G P_XX Gᵀ), but its error does
+            # not follow the pose's (no cross-covariance): where it was right, it carries no pose error
+            u = np.array([c.u_left for c in group], dtype=float)
+            G = along_wall_jacobian(tied_camera, ekf.pose, plane, edge, u)
+            cov = cov + G @ ekf.cov_pose @ G.T
+            new = [NewLandmark.wall(plane, c.s, edge, c.z_low, c.z_high, polarity.get(c.pair, 0)) for c in group]
+            added = ekf.add_landmarks(new, 0.5 * (cov + cov.T), frame=frame)
+        elif tied_camera is not None:
             # measured from the pose, as SLAM does: where the line's ray meets the mapped wall, with the pose's
             # error G δX and the column's (σ_img along the ray) — not from the boundary, which the pose alone chose
             X = ekf.pose

@@ -166,6 +166,16 @@ class EKFConfig:
         before): two such landmarks entered 27 frames apart, with heading σ of 3–4°, seen together cut σθ from
         3.8° to 0.5° with the heading 1.8° off, the linearisation error EKF-SLAM is known for at such heading
         uncertainty.
+    inflation_p : before each update, the directions of the landmark state that an entry error moves (the common
+        shift of a group entered from one boundary, of a wall's landmarks, one landmark's own) are tested against
+        the frame's innovations with the pose profiled out, each at this false-alarm probability, and those the
+        data contradict get the variance they lack (:func:`~stablemarks.estimation.consistency.inflate_inconsistent`):
+        the landmark model's σ can be what its errors usually are while a wrong boundary or a line on texture is
+        widened when it shows. 0: off.
+    widen_blind_entries : landmarks entered in a frame that found none of the filter's landmarks (after the first
+        frame that did) enter at their distance from the boundary, as the map's, but with the pose's variance
+        along the wall added (``G P_XX Gᵀ``, no cross-covariance): the boundary was told from the lines beside it
+        by the pose alone and may be any of them.
     """
 
     gate_probability: float = 0.99
@@ -179,11 +189,16 @@ class EKFConfig:
     wall_info_ratio: float = 1.0
     tie_blind_entries: bool = False
     iterations: int = 5
+    inflation_p: float = 0.0
+    widen_blind_entries: bool = False
 
     def __post_init__(self) -> None:
-        for name in ("edge_updates", "wall_updates", "tie_blind_entries"):
+        for name in ("edge_updates", "wall_updates", "tie_blind_entries", "widen_blind_entries"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(expected("true or false", getattr(self, name), where=f"ekf.{name}"))
+        if isinstance(self.inflation_p, bool) or not isinstance(self.inflation_p, int | float) or \
+                not 0.0 <= self.inflation_p < 1.0:
+            raise ConfigError(expected("a probability in [0, 1) (0: off)", self.inflation_p, where="ekf.inflation_p"))
         if not 0.0 < self.gate_probability < 1.0:
             raise ConfigError(expected("a probability in (0, 1)", self.gate_probability,
                                        where="ekf.gate_probability"))

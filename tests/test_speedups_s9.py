@@ -63,3 +63,80 @@ def test_project_columns_kernel_equals_the_array_code():
                     assert x.shape == y.shape and x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True)
             n_nan += bool(np.isnan(got[0]).any())
     assert n_nan > 100
+
+
+# ------------------------------------------------------------------ the EKF's projection kept at its own state
+def _random_filter(rng):
+    from stablemarks.estimation import JointEKF, NewLandmark
+    from stablemarks.maps import ReferencePlane
+
+    cam = StereoCamera(mount_x=float(rng.normal(0, 0.1)), pan=float(rng.uniform(-0.5, 0.5)))
+    X = np.array([rng.normal(0, 0.3), rng.normal(0, 0.3), np.pi / 2 + rng.normal(0, 0.3)])
+    ekf = JointEKF(cam, X, np.diag([0.05, 0.05, 0.02]) ** 2)
+    wall = ReferencePlane("w", (-3.0, 4.0), (3.0, 4.0), free_edges=("p1", "p2"))
+    n_wall, n_point = int(rng.integers(1, 9)), int(rng.integers(0, 6))
+    new = [NewLandmark.wall(wall, float(s)) for s in rng.uniform(0.5, 5.5, n_wall)]
+    new += [NewLandmark.point((float(rng.uniform(-3, 3)), float(rng.uniform(2, 6)))) for _ in range(n_point)]
+    D = n_wall + 2 * n_point
+    A = rng.normal(0, 0.05, (D, D))
+    ekf.add_landmarks(new, A @ A.T + 1e-4 * np.eye(D))
+    return ekf
+
+
+def _same(got, want):
+    for x, y in zip(got, want, strict=True):
+        assert x.shape == y.shape and x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True)
+
+
+def test_projection_kept_at_the_state_equals_the_projection_of_the_rows():
+    """Any rows (all, a subset in any order, none) at the filter's state, at a copy of it and elsewhere: the same
+    arrays as projecting those rows alone; the kept projection follows the state changed in place, the landmarks
+    added or removed and another pan."""
+    rng = np.random.default_rng(911)
+    n_hits = 0
+    for _ in range(200):
+        ekf = _random_filter(rng)
+        n = ekf.n_landmarks
+        for step in range(4):
+            cam = ekf._camera(float(rng.choice([0.0, 0.1])))
+            for x in (ekf._x, ekf._x.copy(), ekf._x + rng.normal(0, 0.01, len(ekf._x))):
+                for rows in (np.arange(n), rng.permutation(n)[: int(rng.integers(0, n + 1))]):
+                    hit = ekf._projected is not None and ekf._projected[1] == x.tobytes() \
+                        and ekf._projected[0] is cam
+                    n_hits += hit
+                    _same(ekf._project(rows, x, cam), ekf._project_rows(rows, x, cam))
+            if step == 0:
+                ekf.predict(rng.normal(0, 0.05, 3), 1e-4 * np.eye(3))  # the state changed in place
+            elif step == 1:
+                ekf.remove_landmark(ekf.landmark_ids[0]) if n > 1 else None
+                n = ekf.n_landmarks
+            elif step == 2:
+                from stablemarks.estimation import NewLandmark
+
+                ekf.add_landmarks([NewLandmark.point((0.5, 3.0))], 1e-3 * np.eye(2))
+                n = ekf.n_landmarks
+    assert n_hits > 1000
+
+
+def test_predict_observation_and_update_with_the_kept_projection_equal_those_without(monkeypatch):
+    """associate_joint → select_for_update → update as a frame runs them, with the projection kept and with
+    every projection computed anew: the same pairs, state and covariance, bit for bit."""
+    from stablemarks.estimation import JointEKF
+
+    rng = np.random.default_rng(913)
+    for _ in range(60):
+        ekf = _random_filter(rng)
+        uv = ekf.predict_observation().uv
+        measured = uv[np.isfinite(uv).all(axis=1)] + rng.normal(0, 0.7, (int(np.isfinite(uv).all(axis=1).sum()), 2))
+        results = []
+        for kept in (True, False):
+            e = ekf.copy()
+            if not kept:
+                monkeypatch.setattr(JointEKF, "_project", JointEKF._project_rows)
+            chosen = e.select_for_update(e.associate_joint(measured, 0.0))
+            res = e.update([(i, measured[j]) for i, j in chosen], iterations=3)
+            results.append((chosen, e._x.copy(), e._P.copy(), res))
+            monkeypatch.undo()
+        (c1, x1, P1, r1), (c2, x2, P2, r2) = results
+        assert c1 == c2 and np.array_equal(x1, x2) and np.array_equal(P1, P2)
+        assert np.array_equal(r1.nis, r2.nis) and r1.nis_total == r2.nis_total

@@ -88,6 +88,37 @@ def _project_kernel(p, cx, cy, c, s, cu, f, b, r0, r1, jacobians):  # pragma: no
     return uv, J_X, J_p
 
 
+@njit(cache=True, error_model="numpy")
+def _triangulate_kernel(u_l, u_r, cx, cy, c, s, cu, f, b):  # pragma: no cover - numba
+    """:meth:`StereoCamera.triangulate`'s element-wise part for columns (n,) in the world: points ``p`` (n, 2), the
+    Jacobian ``J`` (n, 2, 2) of ``p`` w.r.t. ``(u_l, u_r)`` and the camera coordinates ``Xc``, ``Zc`` (n,). The array
+    code's operations point by point in the same order (squares as products, as NumPy's), so the same doubles."""
+    n = u_l.shape[0]
+    p = np.empty((n, 2))
+    J = np.empty((n, 2, 2))
+    Xc_out = np.empty(n)
+    Zc_out = np.empty(n)
+    fb = f * b
+    for i in range(n):
+        d = u_l[i] - u_r[i]
+        d = d if d > 0 else np.nan
+        Zc = fb / d
+        Xc = (u_l[i] - cu) * Zc / f
+        dZ_dur = fb / (d * d)
+        dZ_dul = -dZ_dur
+        dX_dul = Zc / f + (u_l[i] - cu) * dZ_dul / f
+        dX_dur = (u_l[i] - cu) * dZ_dur / f
+        J[i, 0, 0] = s * dX_dul + c * dZ_dul
+        J[i, 0, 1] = s * dX_dur + c * dZ_dur
+        J[i, 1, 0] = -c * dX_dul + s * dZ_dul
+        J[i, 1, 1] = -c * dX_dur + s * dZ_dur
+        p[i, 0] = cx + c * Zc + s * Xc
+        p[i, 1] = cy + s * Zc - c * Xc
+        Xc_out[i] = Xc
+        Zc_out[i] = Zc
+    return p, J, Xc_out, Zc_out
+
+
 @dataclass(frozen=True)
 class SE2:
     """A planar rigid transform ``T_a_b``: pose of frame b in frame a (``x, y`` in m, ``theta`` in rad).
@@ -403,6 +434,13 @@ class StereoCamera:
         u_r = np.asarray(u_r, dtype=float)
         if u_l.ndim == u_r.ndim == 0 and X is not None and cov_X is None and np.ndim(cov_uv) == 2:
             return self._triangulate_one(float(u_l), float(u_r), X, np.asarray(cov_uv, dtype=float))
+        if X is not None and u_l.ndim == 1 and u_l.shape == u_r.shape:
+            # columns (n,) in the world: the element-wise part below compiled (_triangulate_kernel, the same
+            # doubles), ~3 µs instead of ~15 µs; the covariance by the same matrix products
+            cx, cy, _, c, s = self._frame(X)
+            p, J, Xc, Zc = _triangulate_kernel(np.ascontiguousarray(u_l), np.ascontiguousarray(u_r), cx, cy, c, s,
+                                               self.cu, self.f, self.baseline)
+            return p, self._triangulation_cov(X, J, Xc, Zc, cov_X, sigma_img, cov_uv)
         d = u_l - u_r
         d = np.where(d > 0, d, np.nan)
         fb = self.f * self.baseline
@@ -433,6 +471,11 @@ class StereoCamera:
             p = np.empty(d.shape + (2,))
             p[..., 0] = cx + c * Zc + s * Xc
             p[..., 1] = cy + s * Zc - c * Xc
+        return p, self._triangulation_cov(X, J, Xc, Zc, cov_X, sigma_img, cov_uv)
+
+    def _triangulation_cov(self, X, J, Xc, Zc, cov_X, sigma_img, cov_uv) -> np.ndarray:
+        """:meth:`triangulate`'s covariance from the columns' Jacobian ``J`` (..., 2, 2) and the points' camera
+        coordinates."""
         J_T = np.swapaxes(J, -1, -2)
         if cov_uv is not None:
             cov = J @ np.asarray(cov_uv, dtype=float) @ J_T
@@ -442,7 +485,7 @@ class StereoCamera:
         if X is not None and cov_X is not None:
             J_p_X = self.triangulation_jacobian_pose(X, Xc, Zc)
             cov = cov + J_p_X @ np.asarray(cov_X, dtype=float) @ np.swapaxes(J_p_X, -1, -2)
-        return p, cov
+        return cov
 
     def _triangulate_one(self, u_l: float, u_r: float, X, cov_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`triangulate` of one column pair in the world with a full column covariance (a searched boundary):

@@ -666,7 +666,7 @@ def search_boundary(
     H, W = fit.region.shape
     v0, v1, _ = fit.box[0].indices(H)
     regions = [(fit.region[v0:max(v0, v1)], v0, 0), None]
-    if disparity_right is not None and np.all(np.isfinite(e.u)):
+    if disparity_right is not None and np.isfinite(e.u).all():
         lo_r, hi_r = e.window(1, config.search_sigma)
         # the right region's block is not made: its pixels are tested as the row walk reads them
         # (_right_row_ends; _right_block's box and edge cases)
@@ -744,7 +744,7 @@ def search_boundary(
     cov_uv = np.array([[vb0 + var_w, var_w], [var_w, vb1 + var_w]])  # np.diag(var_b) + var_w
     sigma_u = np.sqrt(np.array([vb0 + var_w, vb1 + var_w]))
     P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
-    if not np.all(np.isfinite(P)):
+    if not np.isfinite(P).all():
         # non-positive disparity from two independent searches: intersect the left ray with the plane
         d_here, _ = pred.disparity_at(u_b[0])
         u_b[1] = u_b[0] - float(d_here)
@@ -785,7 +785,7 @@ def model_features(
     P_edge = plane.edge(edge)
     k = np.asarray(member_idx, dtype=int)
     P_f, cov_f = camera.triangulate(pairs.u_left[k], pairs.u_right[k], X)
-    ok = np.all(np.isfinite(P_f), axis=-1)
+    ok = np.isfinite(P_f).all(axis=-1)
     if not ok.any():
         return []
     k, P_f, cov_f = k[ok], P_f[ok], cov_f[ok]
@@ -879,7 +879,7 @@ def relative_error_model(camera: StereoCamera, fit: PlaneFit, boundary: Boundary
     cov_shared = np.zeros((4, 4))
     cov_shared[:2, :2] = fit.cov_R
     cov_shared[2:, 2:] = cov_ub
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(own))):
+    if not (np.isfinite(J).all() and np.isfinite(own).all()):
         return None, None, None
     return J, np.sqrt(own), cov_shared
 
@@ -1229,7 +1229,7 @@ def landmarks_on_plane(
         if m2 > config.fit_gate_chi2:
             # A wall turned from the map (a wrong pan turns every wall like this): its free edges in view were
             # expected and are not found. A wall merely shifted (a slip, a kidnap) is left to the widened search.
-            in_view = [e for e in fit.plane.free_edges if np.all(np.isfinite(fit.prediction.edges[e].u))
+            in_view = [e for e in fit.plane.free_edges if np.isfinite(fit.prediction.edges[e].u).all()
                        and fit.prediction.edges[e].window(0, config.search_sigma)[1] >= 0
                        and fit.prediction.edges[e].window(0, config.search_sigma)[0] <= camera.width - 1]
             turned = m2_slope > SLOPE_GATE_CHI2
@@ -1260,7 +1260,7 @@ def landmarks_on_plane(
         if ("edge", edge) not in memo:
             lines = members_u
             if memo["edge_pairs"] is not None and len(memo["edge_pairs"]) and \
-                    np.all(np.isfinite(fit.prediction.edges[edge].u)):
+                    np.isfinite(fit.prediction.edges[edge].u).all():
                 box = fit.prediction.box(disparity_left.shape[0], plane_config.row_margin_px)
                 lines = np.concatenate([members_u, edge_lines(camera, fit, edge, memo["edge_pairs"], disparity_left,
                                                               window_px, box=box)])
@@ -1387,7 +1387,7 @@ def on_wall_pairs(camera: StereoCamera, fit: PlaneFit, pairs, config: LandmarkCo
     if len(k) == 0:
         return out
     P, cov = camera.triangulate(ul[k], ur[k], fit.X)
-    ok = np.all(np.isfinite(P), axis=-1)
+    ok = np.isfinite(P).all(axis=-1)
     k, P, cov = k[ok], P[ok], cov[ok]
     if len(k):
         G, var_G, _ = fit.innovation(P, cov)
@@ -1488,7 +1488,7 @@ def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right
     rejected)``: ``found`` None when the edge is not searched, False when searched and not found, else the
     :func:`search_boundary` boundary; ``rejected`` the reasons (with no boundary) it was not searched for."""
     e = fit.prediction.edges[edge]
-    if not np.all(np.isfinite(e.u)):  # the edge is behind the camera
+    if not np.isfinite(e.u).all():  # the edge is behind the camera
         return None, []
     lo, hi = e.window(0, config.search_sigma)
     if hi < 0 or lo > camera.width - 1:
@@ -2036,7 +2036,7 @@ def wall_columns(camera: StereoCamera, fit: PlaneFit, search_sigma: float) -> tu
     unbounded beyond an end that is behind the camera."""
     lo, hi = -np.inf, np.inf
     for name, e in fit.prediction.edges.items():
-        if not np.all(np.isfinite(e.u)):
+        if not np.isfinite(e.u).all():
             continue
         w_lo, w_hi = e.window(0, search_sigma)
         if _inner_columns(camera, fit.X, fit.plane, name, 0.1)[0] >= e.u[0]:  # the wall lies right of this end

@@ -102,7 +102,7 @@ def edge_windows(predictions: list[PlanePrediction], config: Config = Config()
     :func:`landmarks_on_plane` tests against :func:`valid_columns`."""
     sigma = config.landmarks.search_sigma
     return [(e.window(0, sigma), e.window(1, sigma)) for pred in predictions for e in pred.edges.values()
-            if e.free and np.all(np.isfinite(e.u))]
+            if e.free and np.isfinite(e.u).all()]
 
 
 def prediction_regions(predictions: list[PlanePrediction], shape: tuple[int, int], config: Config = Config()

@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import copy as _copy
 import functools
+import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -605,7 +606,7 @@ def _closed_form_gains(S, C, P_XX):  # pragma: no cover - numba
 # ---------------------------------------------------------------- validation
 def _matrix(a, shape: tuple[int, int], where: str) -> np.ndarray:
     m = np.asarray(a, dtype=float)
-    if m.shape != shape or not np.all(np.isfinite(m)):
+    if m.shape != shape or not np.isfinite(m).all():
         got = f"shape {m.shape}" if m.shape != shape else "non-finite entries"
         raise InputError(f"{where}: expected a finite {shape[0]}×{shape[1]} matrix, got {got}")
     return m
@@ -626,6 +627,12 @@ def _covariance(a, n: int, where: str) -> np.ndarray:
 
 
 # --------------------------------------------------------------------- filter
+def _wrap(a) -> float:
+    """:func:`wrap_angle` of one angle on Python floats: the same IEEE operations (``%`` floors as NumPy's
+    remainder does, with the divisor's sign), without the array call (a dozen a frame in :meth:`JointEKF.update`)."""
+    return (float(a) + math.pi) % (2.0 * math.pi) - math.pi
+
+
 def _backtrack(cost, x_from: np.ndarray, x_to: np.ndarray, c_from: float, halvings: int = 5
                ) -> tuple[np.ndarray, float, tuple] | None:
     """The point on the step ``x_from → x_to`` (heading wrapped) whose ``cost`` does not exceed ``c_from``,
@@ -633,12 +640,12 @@ def _backtrack(cost, x_from: np.ndarray, x_to: np.ndarray, c_from: float, halvin
     none does. Differences within 1e-9 of the cost (its round-off near the minimum) count as no increase, so that
     the result does not depend on them."""
     step = x_to - x_from
-    step[2] = wrap_angle(step[2])
+    step[2] = _wrap(step[2])
     slack = 1e-9 * max(1.0, abs(c_from))
     t = 1.0
     for _ in range(halvings + 1):
         x = x_from + t * step
-        x[2] = wrap_angle(x[2])
+        x[2] = _wrap(x[2])
         c, projection = cost(x)
         if c <= c_from + slack:
             return x, c, projection
@@ -665,7 +672,7 @@ class JointEKF:
         self._camera_base = camera
         self.config = config if config is not None else EKFConfig()
         x0 = pose.as_array() if isinstance(pose, SE2) else np.asarray(pose, dtype=float)
-        if x0.shape != (3,) or not np.all(np.isfinite(x0)):
+        if x0.shape != (3,) or not np.isfinite(x0).all():
             raise InputError(expected("a finite pose (x, y, theta)", pose, where="ekf.pose"))
         self._x = x0.copy()
         self._x[2] = wrap_angle(self._x[2])
@@ -676,6 +683,7 @@ class JointEKF:
         self._tracks: dict[int, _Track] = {}
         self._next_id = 0
         self._aux: dict[str, int] = {}  # auxiliary states (a wall's shared disparity error), between pose and landmarks
+        self._projected = None  # (camera, state bytes, projection of every landmark): see _project
         self._reindex()
 
     # --------------------------------------------------------- bookkeeping
@@ -690,6 +698,7 @@ class JointEKF:
         self._idx2 = np.stack([first, first + dims - 1], axis=1)  # state indices of (l_1, l_2); walls repeat l_1
         self._start = np.array([t.start for t in tracks]).reshape(n, 2)
         self._J_p_l = np.array([t.J_p_l for t in tracks]).reshape(n, 2, 2)
+        self._projected = None  # made with the former landmarks
 
     @property
     def _l0(self) -> int:
@@ -794,7 +803,7 @@ class JointEKF:
         ``P_XL ← F P_XL``: O(n).
         """
         U = np.asarray(U, dtype=float)
-        if U.shape != (3,) or not np.all(np.isfinite(U)):
+        if U.shape != (3,) or not np.isfinite(U).all():
             raise InputError(expected("a finite odometry increment (dx, dy, dtheta)", U, where="predict.U"))
         cov_U = _matrix(cov_U, (3, 3), "predict.cov_U")  # symmetric PSD by contract; not checked per step
         X_new, F, J_U = motion(self._x[:3], U, jacobians=True)
@@ -831,7 +840,7 @@ class JointEKF:
         longer be trusted): mean ``pose`` (3,), covariance ``cov_pose`` (3, 3), no correlation with the landmarks.
         ``P`` stays PSD (block diagonal of two PSD blocks)."""
         x = np.asarray(pose, dtype=float)
-        if x.shape != (3,) or not np.all(np.isfinite(x)):
+        if x.shape != (3,) or not np.isfinite(x).all():
             raise InputError(expected("a finite pose (x, y, theta)", pose, where="reset_pose.pose"))
         self._x[:3] = x
         self._x[2] = wrap_angle(self._x[2])
@@ -908,7 +917,7 @@ class JointEKF:
         S = H @ PHt[idx]
         S = 0.5 * (S + S.T)
         if R is None:
-            S[np.diag_indices(len(S))] += self._var_img
+            S.flat[:: len(S) + 1] += self._var_img  # the diagonal
         else:
             S = S + R
         return PHt, S, np.linalg.solve(S, np.column_stack([PHt.T, nu]))
@@ -980,7 +989,24 @@ class JointEKF:
 
     # ------------------------------------------------------------ observation
     def _project(self, rows: np.ndarray, x: np.ndarray, camera: StereoCamera):
-        """``uv`` (m, 2), ``J_I_X`` (m, 2, 3), ``J_I_l`` (m, 2, 2) of landmarks ``rows`` at state ``x``."""
+        """``uv`` (m, 2), ``J_I_X`` (m, 2, 3), ``J_I_l`` (m, 2, 2) of landmarks ``rows`` at state ``x``.
+
+        At the filter's own state every landmark is projected once and kept (:attr:`_projected`): association,
+        :meth:`select_for_update` and the update's first linearisation all project there, ~20 µs a call in a
+        frame. A later call at the same state bytes, camera object and landmarks (:meth:`_reindex` drops it) takes
+        its rows from it: the same numbers, as each landmark's projection is computed on its own."""
+        cache = self._projected
+        if cache is not None and cache[0] is camera and cache[1] == x.tobytes():
+            uv, J_I_X, J_I_l = cache[2]
+            return uv[rows], J_I_X[rows], J_I_l[rows]
+        if x is not self._x:
+            return self._project_rows(rows, x, camera)
+        every = self._project_rows(np.arange(len(self._ids)), x, camera)
+        self._projected = (camera, x.tobytes(), every)
+        return every[0][rows], every[1][rows], every[2][rows]
+
+    def _project_rows(self, rows: np.ndarray, x: np.ndarray, camera: StereoCamera):
+        """:meth:`_project` computed."""
         J_p_l = self._J_p_l[rows]
         p = self._start[rows] + np.einsum("mij,mj->mi", J_p_l, x[self._idx2[rows]])
         uv, J_I_X, J_I_p = camera.project_columns(x[:3], p, jacobians=True)
@@ -1007,7 +1033,7 @@ class JointEKF:
         S = H @ P_sub @ np.swapaxes(H, 1, 2) + self._R1
         S = 0.5 * (S + np.swapaxes(S, 1, 2))
         m = self.config.margin_px
-        in_view = np.all(np.isfinite(uv), axis=1) & np.all(self._camera_base.in_image(uv, m), axis=1)
+        in_view = np.isfinite(uv).all(axis=1) & self._camera_base.in_image(uv, m).all(axis=1)
         return ObservationPrediction(self._ids[rows].copy(), uv, J_I_X, J_I_l, S, in_view)
 
     def visible(self, pan: float = 0.0, max_incidence: float | None = None) -> list[int]:
@@ -1066,7 +1092,7 @@ class JointEKF:
         ``(uv, J_I_X, J_I_l)`` it was made from (row by row as :meth:`_project` gives them), for
         :meth:`associate_joint`'s trials (a second projection of the same landmarks costs ~15–30 µs)."""
         z = np.asarray(measured, dtype=float).reshape(-1, 2) if np.size(measured) else np.zeros((0, 2))
-        if not np.all(np.isfinite(z)):
+        if not np.isfinite(z).all():
             raise InputError(expected("finite measured columns", measured, where="associate.measured"))
         pred = self.predict_observation(candidates, pan)
         ids, uv, S = pred.ids[pred.in_view], pred.uv[pred.in_view], pred.S[pred.in_view]
@@ -1237,7 +1263,7 @@ class JointEKF:
         # the k best could turn on less than GAIN_RANK_TOL (or the pose covariance is near singular: NaN), rank by
         # the gains as information_gain makes them
         gaps = g[:-1][: k] - g[1:][: k]
-        if not (np.all(np.isfinite(g)) and np.all(gaps > GAIN_RANK_TOL * (1.0 + np.abs(g[1:][: k])))):
+        if not (np.isfinite(g).all() and (gaps > GAIN_RANK_TOL * (1.0 + np.abs(g[1:][: k]))).all()):
             order = np.argsort(-self._information_gain(*terms), kind="stable")
         return [pairs[i] for i in order[:k]]
 
@@ -1247,8 +1273,8 @@ class JointEKF:
         over the observed part of the state plus the columns' squared residuals over σ_img²; None where that
         part of the covariance is singular (a Cholesky factorisation fails). ``cost(x)`` returns the cost and
         :meth:`_project`'s result at ``x``, which the next linearisation there takes instead of projecting again."""
-        idx_u = np.unique(idx)
-        P_u = self._P[np.ix_(idx_u, idx_u)]
+        idx_u = np.array(sorted(set(idx.tolist())), dtype=idx.dtype)  # np.unique's, without its overhead
+        P_u = self._P[idx_u[:, None], idx_u]
         try:
             np.linalg.cholesky(P_u)
         except np.linalg.LinAlgError:
@@ -1259,10 +1285,10 @@ class JointEKF:
         def cost(x: np.ndarray) -> tuple[float, tuple]:
             projection = self._project(rows, x, camera)
             uv = projection[0]
-            if not np.all(np.isfinite(uv)):
+            if not np.isfinite(uv).all():
                 return np.inf, projection
             d = x[idx_u] - x0[idx_u]
-            d[2] = wrap_angle(d[2])
+            d[2] = _wrap(d[2])
             r = (z - uv).reshape(-1)
             return float(d @ info @ d + r @ r / var), projection
 
@@ -1302,7 +1328,7 @@ class JointEKF:
         rows = self._rows([o[0] for o in obs], "update.observations")
         z = np.asarray([o[1] for o in obs], dtype=float)
         m = len(rows)
-        if z.shape != (m, 2) or not np.all(np.isfinite(z)):
+        if z.shape != (m, 2) or not np.isfinite(z).all():
             raise InputError(expected("finite (u_l, u_r) per observation", [o[1] for o in obs],
                                       where="update.observations"))
         idx = np.concatenate([np.arange(3), self._idx2[rows].ravel()])
@@ -1315,15 +1341,15 @@ class JointEKF:
         c_i, projection = np.inf, None  # the cost at x_i and the projection there, when the cost computed it
         for it in range(n_it):
             uv, J_I_X, J_I_l = projection if projection is not None else self._project(rows, x_i, camera)
-            if not np.all(np.isfinite(uv)):
-                bad = int(self._ids[rows[~np.all(np.isfinite(uv), axis=1)][0]])
+            if not np.isfinite(uv).all():
+                bad = int(self._ids[rows[~np.isfinite(uv).all(axis=1)][0]])
                 raise GeometryError(f"landmark {bad} is behind the camera; it cannot update the filter")
             H_l = np.zeros((m, 2, m, 2))
             H_l[ar, :, ar, :] = J_I_l  # block diagonal; a wall landmark's repeated index gets a zero column
             H = np.concatenate([J_I_X.reshape(2 * m, 3), H_l.reshape(2 * m, 2 * m)], axis=1)
             # iterated EKF: the innovation relinearised at x_i, ν_i = z − h(x_i) − H_i (x0 − x_i)
             dx = x0[idx] - x_i[idx]
-            dx[2] = wrap_angle(dx[2])
+            dx[2] = _wrap(dx[2])
             nu = (z - uv).reshape(-1) - H @ dx
             if it == 0:
                 nu0 = nu
@@ -1341,7 +1367,7 @@ class JointEKF:
             elif cost is not None:
                 c_new, projection = cost(x_new)
             step = np.abs(x_new[idx] - x_i[idx])
-            step[2] = abs(wrap_angle(x_new[2] - x_i[2]))
+            step[2] = abs(_wrap(x_new[2] - x_i[2]))
             x_i = x_new
             if cost is not None:
                 c_i = c_new
@@ -1351,14 +1377,14 @@ class JointEKF:
                 # converged when the step moves no observed state component by 1 % of its posterior σ (the
                 # mean's share of the NEES then changes by 1e-4): clean frames stop after one relinearisation
                 var_post = self._P[idx, idx] - np.einsum("ij,ij->i", K[idx], PHt[idx])
-                if np.all(step <= 0.01 * np.sqrt(np.maximum(var_post, 0.0))):
+                if (step <= 0.01 * np.sqrt(np.maximum(var_post, 0.0))).all():
                     break
         self._x = x_i
         with _one_blas_thread(len(self._x)):
             _add_sym_rank(self._P, 0.5 * (K @ S) - PHt, K)
         nu = nu0
         sol = np.linalg.solve(S, nu[:, None]) if iterations > 1 else sol[:, -1:]
-        self._x[2] = wrap_angle(self._x[2])
+        self._x[2] = _wrap(self._x[2])
         nis_total = float(nu @ sol[:, -1])
         nu2 = nu.reshape(m, 2)
         S_blocks = S.reshape(m, 2, m, 2)[ar, :, ar, :]
@@ -1382,10 +1408,10 @@ class JointEKF:
         z = np.asarray(measured, dtype=float).reshape(-1, 2)
         m = len(p)
         R = np.asarray(cov_measured, dtype=float)
-        if R.shape != (m, 2, 2) or not np.all(np.isfinite(R)):
+        if R.shape != (m, 2, 2) or not np.isfinite(R).all():
             raise InputError(expected(f"a finite ({m}, 2, 2) array of covariances", R.shape,
                                       where="update_known_points.cov_measured"))
-        if z.shape != (m, 2) or not (np.all(np.isfinite(z)) and np.all(np.isfinite(p))):
+        if z.shape != (m, 2) or not (np.isfinite(z).all() and np.isfinite(p).all()):
             raise InputError(expected("finite (u_l, u_r) and positions, one per point", z,
                                       where="update_known_points"))
         uv, J_I_X, J_I_p = self._camera(pan).project_columns(self._x[:3], p, jacobians=True)
@@ -1407,7 +1433,7 @@ class JointEKF:
         if len(np.asarray(points, dtype=float).reshape(-1, 2)) == 0:
             return UpdateResult()
         nu2, J_I_X, R = self._known_points(points, measured, cov_measured, pan, cov_points)
-        if not np.all(np.isfinite(nu2)):
+        if not np.isfinite(nu2).all():
             raise GeometryError("a known point is behind the camera; it cannot update the filter")
         m = len(nu2)
         ar = np.arange(m)
@@ -1432,7 +1458,7 @@ class JointEKF:
         nu, J_I_X, R = self._known_points(points, measured, cov_measured, pan, cov_points)
         S = J_I_X @ self._P[:3, :3] @ np.swapaxes(J_I_X, 1, 2) + R
         out = np.full(len(nu), np.inf)
-        ok = np.all(np.isfinite(nu), axis=1)
+        ok = np.isfinite(nu).all(axis=1)
         out[ok] = np.einsum("mi,mi->m", nu[ok], np.linalg.solve(S[ok], nu[ok][..., None])[..., 0])
         return out
 

@@ -101,3 +101,33 @@ def test_off_or_too_few_observations_do_nothing(p, n):
     ids = (a + b)[:n]
     assert inflate_inconsistent(ekf, _observe(ekf, ids, truth, rng), 0.0, groups, p) == []
     np.testing.assert_array_equal(ekf.cov, P0)
+
+
+def test_the_localizer_logs_what_it_widened(lab_scenario):
+    """With ``ekf.inflation_p`` the localizer tests each update (a group's landmarks are recorded at entry) and
+    every ``log.jsonl`` line has ``inflated``; off (the default) it is empty and nothing is tested."""
+    import json
+
+    import stablemarks as sm
+    from stablemarks.sim.run import simulate_run
+    from stablemarks.sim.source import SimulatedSource
+
+    run = simulate_run(lab_scenario, seed=2)
+    narrow = {"noise": {"sigma_img": 0.02, "boundary_px": 0.02}, "ekf": {"landmark_sigma_floor": 0.0}}
+    for p in (0.0, 0.5):  # 0.5 and lines taken to 0.02 px: a test that fires on ordinary frames too
+        source = SimulatedSource(run, frames=5)
+        cfg = sm.Config().with_overrides(narrow).with_overrides({"ekf": {"inflation_p": p}}).with_source_defaults(
+            source.config_defaults)
+        loc = sm.Localizer(source.world_map, source.camera, start_pose=run.dead_reckoning[0], config=cfg)
+        fired = []
+        for f in source:
+            rec = loc.step(f.stamp, f.left, f.right, odometry=f.odometry, pan=f.pan).record
+            line = json.loads(json.dumps(rec.to_dict()))
+            assert isinstance(line["inflated"], list)
+            fired += line["inflated"]
+            assert_psd(loc.ekf.cov)
+        if p == 0.0:
+            assert not fired
+        else:
+            assert fired and all(d["alpha"] > 0 and d["t"] > 0 for d in fired)
+            assert {i for d in fired for i in d["ids"]} <= set(loc.ekf.landmark_ids) | set(loc.retired)

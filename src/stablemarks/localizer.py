@@ -206,6 +206,8 @@ class FrameRecord:
             "landmark_couplings": [{"ids": ids, "G": G, "pose": X} for ids, G, X in self.landmark_couplings],
             "wall_measurements": [{"plane": p, "nu": nu, "H": H, "J_bias": J, "R": R, "var_bias": v, "pose": X}
                                   for p, nu, H, J, R, v, X in self.wall_measurements],
+            "inflated": [{"ids": list(ids), "t": float(t), "alpha": float(a), "group": bool(g)}
+                         for ids, t, a, g in self.inflated],
             "candidates": self.candidates, "boundaries": self.boundaries,
         }
 

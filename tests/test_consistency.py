@@ -131,3 +131,30 @@ def test_the_localizer_logs_what_it_widened(lab_scenario):
         else:
             assert fired and all(d["alpha"] > 0 and d["t"] > 0 for d in fired)
             assert {i for d in fired for i in d["ids"]} <= set(loc.ekf.landmark_ids) | set(loc.retired)
+
+
+def test_the_floor_grows_with_range():
+    """``ekf.landmark_sigma_floor_per_m``: after an update a wall landmark is held no more certain than the floor
+    plus this times its range from the camera; the nearer one's floor is lower. Off (0) nothing is added."""
+    from stablemarks.errors import ConfigError
+
+    per_m = 0.001
+    for k in (0.0, per_m):
+        ekf = JointEKF(CAM, np.zeros(3), np.diag([1e-4, 1e-4, 1e-6]),
+                       EKFConfig(landmark_sigma_floor=0.0, landmark_sigma_floor_per_m=k))
+        ids = ekf.add_landmarks([NewLandmark.wall(FRONT, 1.0), NewLandmark.wall(SIDE, 2.5, edge="p2")],
+                                1e-8 * np.eye(2))
+        for _ in range(3):
+            z = ekf.predict_observation(ids).uv
+            ekf.update([(i, z[j]) for j, i in enumerate(ids)])
+        centre = CAM.optical_centres(ekf.pose)[0]
+        for i in ids:
+            var = ekf.cov[ekf.state_slice(i), ekf.state_slice(i)][0, 0]
+            rng = float(np.hypot(*(ekf.landmark_position(i) - centre)))
+            if k:
+                assert var == pytest.approx((k * rng) ** 2, rel=1e-9)
+            else:
+                assert var < 1e-8
+        assert_psd(ekf.cov)
+    with pytest.raises(ConfigError, match="landmark_sigma_floor_per_m"):
+        EKFConfig(landmark_sigma_floor_per_m=-1.0)

@@ -167,6 +167,9 @@ class EKFConfig:
         before): two such landmarks entered 27 frames apart, with heading σ of 3–4°, seen together cut σθ from
         3.8° to 0.5° with the heading 1.8° off, the linearisation error EKF-SLAM is known for at such heading
         uncertainty.
+    landmark_sigma_floor_per_m : a floor that grows with the landmark's range from the camera at the update:
+        ``landmark_sigma_floor + this × range`` [m per m]. A line's error that stays with it is a fixed angle, so
+        its share of the landmark's error grows with range. 0: off.
     inflation_p : before each update, the directions of the landmark state that an entry error moves (the common
         shift of a group entered from one boundary, of a wall's landmarks, one landmark's own) are tested against
         the frame's innovations with the pose profiled out, each at this false-alarm probability, and those the
@@ -190,6 +193,7 @@ class EKFConfig:
     wall_info_ratio: float = 1.0
     tie_blind_entries: bool = False
     iterations: int = 5
+    landmark_sigma_floor_per_m: float = 0.0
     inflation_p: float = 0.0
     widen_blind_entries: bool = False
 
@@ -210,6 +214,10 @@ class EKFConfig:
             m = getattr(self, name)
             if isinstance(m, bool) or not isinstance(m, int | np.integer) or m < 1:
                 raise ConfigError(expected("a positive integer", m, where=f"ekf.{name}"))
+        v = self.landmark_sigma_floor_per_m
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v >= 0):
+            raise ConfigError(expected("a non-negative number of metres per metre of range", v,
+                                       where="ekf.landmark_sigma_floor_per_m"))
         if not (np.isfinite(self.landmark_sigma_floor) and self.landmark_sigma_floor >= 0):
             raise ConfigError(expected("a non-negative number of metres", self.landmark_sigma_floor,
                                        where="ekf.landmark_sigma_floor"))
@@ -1394,11 +1402,19 @@ class JointEKF:
             t.n_observed += 1
             t.last_frame = frame if frame is not None else t.last_frame
         floor = self.config.landmark_sigma_floor**2
-        if floor > 0:
+        per_m = self.config.landmark_sigma_floor_per_m
+        if floor > 0 or per_m > 0:
+            centre = camera.optical_centres(self._x[:3])[0] if per_m > 0 else None
             for r in rows:
                 i = int(self._idx2[r, 0])
-                if self._tracks[int(self._ids[r])].kind == "wall" and self._P[i, i] < floor:
-                    self._P[i, i] = floor  # adds floor − P_ii ≥ 0 on the diagonal: P stays PSD
+                if self._tracks[int(self._ids[r])].kind != "wall":
+                    continue
+                f2 = floor
+                if per_m > 0:  # the floor at this landmark's range from the camera
+                    rng = float(np.hypot(*(self._start[r] + self._J_p_l[r] @ self._x[self._idx2[r]] - centre)))
+                    f2 = (self.config.landmark_sigma_floor + per_m * rng) ** 2
+                if self._P[i, i] < f2:
+                    self._P[i, i] = f2  # adds floor − P_ii ≥ 0 on the diagonal: P stays PSD
         return UpdateResult(self._ids[rows].copy(), nu2, nis, nis_total)
 
     def _known_points(self, points, measured, cov_measured, pan: float, cov_points):

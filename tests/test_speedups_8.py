@@ -621,34 +621,7 @@ def test_dilate_equals_the_reference():
                 assert got.dtype == bool and np.array_equal(got, want)
 
 
-# ------------------------------------------------------------------ a few points projected with their Jacobians
-def test_project_few_points_equals_the_array_path(monkeypatch):
-    """:meth:`StereoCamera.project_columns` with Jacobians of 0 to 8 points ((2,) and (n, 2)) on Python floats
-    against the array path (:data:`~stablemarks.geometry._FEW_POINTS` set to 0): the same columns and Jacobians,
-    shapes and dtypes, bit for bit, NaN behind the camera."""
-    from stablemarks import geometry
-    from stablemarks.geometry import StereoCamera
-
-    rng = np.random.default_rng(107)
-    n_nan = 0
-    for _ in range(1500):
-        cam = StereoCamera(f=float(rng.uniform(200, 900)), cu=float(rng.uniform(100, 500)),
-                           baseline=float(rng.uniform(0.05, 0.5)), mount_x=float(rng.normal(0, 0.2)),
-                           mount_y=float(rng.normal(0, 0.2)), pan=float(rng.uniform(-1, 1)))
-        X = np.array([rng.normal(0, 3), rng.normal(0, 3), rng.uniform(-np.pi, np.pi)])
-        n = int(rng.integers(0, 9))
-        for p in (rng.normal(0, 5, (n, 2)), rng.normal(0, 5, 2)):
-            got = cam.project_columns(X, p, jacobians=True)
-            monkeypatch.setattr(geometry, "_FEW_POINTS", 0)
-            want = cam.project_columns(X, p, jacobians=True)
-            monkeypatch.undo()
-            for x, y in zip(got, want, strict=True):
-                assert x.shape == y.shape and x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True)
-            n_nan += bool(np.isnan(got[0]).any())
-    assert n_nan > 100
-
-
-# ------------------------------------------------------------------ the whole frame, every replaced step swapped back
+# ------------------------------------------------------------------ the whole frame against the former code
 def _frame_former(monkeypatch):
     """Swap every step this pass replaced back to its former code (the references above and those of
     tests/test_speedups_7.py), for :func:`test_frame_equals_the_former_pipeline`."""
@@ -690,7 +663,6 @@ def _frame_former(monkeypatch):
         return cv2.dilate(region.astype(np.uint8), np.ones((2 * px + 1, 2 * px + 1), np.uint8)).astype(bool)
 
     monkeypatch.setattr(geometry.StereoCamera, "_frame", frame_reference)
-    monkeypatch.setattr(geometry, "_FEW_POINTS", 0)
     monkeypatch.setattr(P, "predict_plane", predict_plane_reference)
     monkeypatch.setattr(PL, "fit_plane", fit_plane_reference)
     monkeypatch.setattr(P, "dilate", dilate_reference)

@@ -27,11 +27,6 @@ SIGMA_IMG = 0.5
 MIN_DEPTH = 1e-3
 """Points closer than this in front of the camera [m] are treated as not projectable."""
 
-_FEW_POINTS = 8
-"""Up to this many points :meth:`StereoCamera.project_columns` with Jacobians once computed on Python floats (now
-every point count goes through the compiled :func:`_project_kernel`; the name stays for the callers that batch
-"a few" points)."""
-
 
 def wrap_angle(a):
     """Wrap angles to ``[-pi, pi)``; works on scalars and arrays."""

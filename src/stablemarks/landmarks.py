@@ -1595,8 +1595,8 @@ def nearer_silhouettes(camera: StereoCamera, X, cov_X, world_map: Map, plane, mi
 
 
 _FEW_ENDS = 8
-"""Ends projected together by :func:`nearer_silhouettes`: at most :data:`~stablemarks.geometry._FEW_POINTS`, the
-points :meth:`~stablemarks.geometry.StereoCamera.project_columns` projects one by one on Python floats."""
+"""Ends projected together, in one :meth:`~stablemarks.geometry.StereoCamera.project_columns` call, by
+:func:`nearer_silhouettes`."""
 
 
 def _wall_ends(world_map: Map, plane) -> tuple[list, np.ndarray, np.ndarray]:

@@ -1,5 +1,6 @@
-"""Checks of the s9 speed pass: each rewritten step against the code it replaced (kept here as a reference),
-bit for bit unless said otherwise."""
+"""Checks of the s9 speed pass: each rewritten step against the code it replaced (kept here as a reference, or,
+for ``triangulate``, the array code the method keeps for columns of other shapes), bit for bit unless said
+otherwise."""
 
 from __future__ import annotations
 
@@ -42,16 +43,20 @@ def project_columns_reference(cam: StereoCamera, X, points, jacobians: bool = Fa
     return uv, J_I_X, J_I_p
 
 
+def _random_camera_and_pose(rng) -> tuple[StereoCamera, np.ndarray]:
+    cam = StereoCamera(f=float(rng.uniform(200, 900)), cu=float(rng.uniform(100, 500)),
+                       baseline=float(rng.uniform(0.05, 0.5)), mount_x=float(rng.normal(0, 0.2)),
+                       mount_y=float(rng.normal(0, 0.2)), pan=float(rng.uniform(-1, 1)))
+    return cam, np.array([rng.normal(0, 3), rng.normal(0, 3), rng.uniform(-np.pi, np.pi)])
+
+
 def test_project_columns_kernel_equals_the_array_code():
     """Points (2,), (n, 2) and (a, n, 2), with and without Jacobians, 0 to 30 of them, some behind the camera: the
     same columns and Jacobians as the former array code, shapes and dtypes, bit for bit, NaN where it had NaN."""
     rng = np.random.default_rng(907)
     n_nan = 0
     for _ in range(1500):
-        cam = StereoCamera(f=float(rng.uniform(200, 900)), cu=float(rng.uniform(100, 500)),
-                           baseline=float(rng.uniform(0.05, 0.5)), mount_x=float(rng.normal(0, 0.2)),
-                           mount_y=float(rng.normal(0, 0.2)), pan=float(rng.uniform(-1, 1)))
-        X = np.array([rng.normal(0, 3), rng.normal(0, 3), rng.uniform(-np.pi, np.pi)])
+        cam, X = _random_camera_and_pose(rng)
         n = int(rng.integers(0, 31))
         for p in (rng.normal(0, 5, (n, 2)), rng.normal(0, 5, 2), rng.normal(0, 5, (2, n, 2)),
                   np.asfortranarray(rng.normal(0, 5, (n, 2)))):
@@ -144,37 +149,13 @@ def test_predict_observation_and_update_with_the_kept_projection_equal_those_wit
 
 # ------------------------------------------------------------------ triangulate of column arrays by the kernel
 def triangulate_reference(cam: StereoCamera, u_l, u_r, X, cov_X=None, sigma_img=None, cov_uv=None):
-    """The former array code of :meth:`StereoCamera.triangulate` in the world."""
-    u_l = np.asarray(u_l, dtype=float)
-    u_r = np.asarray(u_r, dtype=float)
-    d = u_l - u_r
-    d = np.where(d > 0, d, np.nan)
-    fb = cam.f * cam.baseline
-    Zc = fb / d
-    Xc = (u_l - cam.cu) * Zc / cam.f
-    dZ_dur = fb / d**2
-    dZ_dul = -dZ_dur
-    J = np.empty(d.shape + (2, 2))
-    dX_dul = Zc / cam.f + (u_l - cam.cu) * dZ_dul / cam.f
-    dX_dur = (u_l - cam.cu) * dZ_dur / cam.f
-    cx, cy, _, c, s = cam._frame(X)
-    J[..., 0, 0] = s * dX_dul + c * dZ_dul
-    J[..., 0, 1] = s * dX_dur + c * dZ_dur
-    J[..., 1, 0] = -c * dX_dul + s * dZ_dul
-    J[..., 1, 1] = -c * dX_dur + s * dZ_dur
-    p = np.empty(d.shape + (2,))
-    p[..., 0] = cx + c * Zc + s * Xc
-    p[..., 1] = cy + s * Zc - c * Xc
-    J_T = np.swapaxes(J, -1, -2)
-    if cov_uv is not None:
-        cov = J @ np.asarray(cov_uv, dtype=float) @ J_T
-    else:
-        s_img = np.asarray(cam.sigma_img if sigma_img is None else sigma_img, dtype=float)
-        cov = s_img**2 * J @ J_T if s_img.ndim == 0 else (J * (s_img**2)[..., None, :]) @ J_T
-    if cov_X is not None:
-        J_p_X = cam.triangulation_jacobian_pose(X, Xc, Zc)
-        cov = cov + J_p_X @ np.asarray(cov_X, dtype=float) @ np.swapaxes(J_p_X, -1, -2)
-    return p, cov
+    """:meth:`StereoCamera.triangulate`'s array code, which columns of any other shape still take: the same columns
+    as (n, 1), the result back to (n, ...)."""
+    if sigma_img is not None and np.ndim(sigma_img) == 2:
+        sigma_img = np.asarray(sigma_img)[:, None, :]
+    p, cov = cam.triangulate(np.asarray(u_l)[:, None], np.asarray(u_r)[:, None], X, cov_X, sigma_img=sigma_img,
+                             cov_uv=cov_uv)
+    return p[:, 0], cov[:, 0]
 
 
 def test_triangulate_kernel_equals_the_array_code():
@@ -183,10 +164,7 @@ def test_triangulate_kernel_equals_the_array_code():
     rng = np.random.default_rng(919)
     n_nan = 0
     for _ in range(1500):
-        cam = StereoCamera(f=float(rng.uniform(200, 900)), cu=float(rng.uniform(100, 500)),
-                           baseline=float(rng.uniform(0.05, 0.5)), mount_x=float(rng.normal(0, 0.2)),
-                           mount_y=float(rng.normal(0, 0.2)), pan=float(rng.uniform(-1, 1)))
-        X = np.array([rng.normal(0, 3), rng.normal(0, 3), rng.uniform(-np.pi, np.pi)])
+        cam, X = _random_camera_and_pose(rng)
         n = int(rng.integers(0, 20))
         u_l = rng.uniform(0, 640, n)
         u_r = u_l - rng.uniform(-5, 60, n)

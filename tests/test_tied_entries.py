@@ -147,3 +147,10 @@ def test_widened_blind_entries_hold_the_poses_uncertainty_without_following_it(l
         G = along_wall_jacobian(cam, X, plane, cands[0].edge, [c.u_left for c in cands])
         np.testing.assert_allclose(cov, np.asarray(cov_off) + G @ on_est.record.cov_pose @ G.T, rtol=1e-9,
                                    atol=1e-12)
+
+
+def test_blind_entries_are_tied_or_widened_not_both():
+    from stablemarks.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="at most one"):
+        sm.Config().with_overrides({"ekf": {"tie_blind_entries": True, "widen_blind_entries": True}})

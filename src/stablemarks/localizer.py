@@ -993,12 +993,11 @@ class Localizer:
             if chosen:
                 pairs = front.kept_pairs
                 measured = np.stack([pairs.u_left, pairs.u_right], axis=-1)
+                observations = [(i, measured[j]) for i, j in chosen]
                 if self.config.ekf.inflation_p > 0 and not recovering:
                     record.inflated = [(list(f.ids), f.t, f.alpha, f.group) for f in inflate_inconsistent(
-                        self.ekf, [(i, measured[j]) for i, j in chosen], pan, self._groups,
-                        self.config.ekf.inflation_p)]
-                res = self.ekf.update([(i, measured[j]) for i, j in chosen], pan, frame=k,
-                                      iterations=self.config.ekf.iterations)
+                        self.ekf, observations, pan, self._groups, self.config.ekf.inflation_p)]
+                res = self.ekf.update(observations, pan, frame=k, iterations=self.config.ekf.iterations)
                 record.measurements = [(int(i), float(measured[j][0]), float(measured[j][1])) for i, j in chosen]
                 record.observed = [int(i) for i in res.ids]
                 record.nis = [float(v) for v in res.nis]
@@ -1009,13 +1008,14 @@ class Localizer:
                 if chosen and model is not None:
                     model, rechecked = self._recheck_boundaries(model, pan, record)
                 closed = self._walls_missed(model, assoc, pan, record)
-                # a frame that found none of the filter's landmarks enters its new ones tied to the pose
+                # a frame that found none of the filter's landmarks may enter its new ones tied to the pose or widened
                 # (enter_wall_landmarks): their boundary was told from other lines by the pose alone
-                tied = self.config.ekf.tie_blind_entries and not record.observed and self._observed_once
-                if self.config.ekf.widen_blind_entries and not record.observed and self._observed_once:
-                    tied = "widen"
+                blind = None
+                if not record.observed and self._observed_once:  # (at most one of the two: EKFConfig)
+                    blind = "tied" if self.config.ekf.tie_blind_entries else \
+                        "widened" if self.config.ekf.widen_blind_entries else None
                 entered = method.enter(self.ekf, front, model, {int(j) for _, j in assoc}, cam_k, self.world_map, k,
-                                       self.config, closed_planes=closed, tied=tied)
+                                       self.config, closed_planes=closed, blind=blind)
             record.new, record.landmark_priors = list(entered.ids), list(entered.priors)
             for ids_g, _, _ in entered.priors:
                 self._n_groups += 1

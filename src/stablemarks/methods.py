@@ -41,7 +41,7 @@ class Entered:
     candidates: list[Candidate | None] = field(default_factory=list)
     priors: list[tuple[list[int], list[float], np.ndarray]] = field(default_factory=list)
     couplings: list[tuple[list[int], np.ndarray, np.ndarray]] = field(default_factory=list)
-    """Groups entered tied to the pose (``enter(..., tied=True)``): ``(ids, G (n, 3), X)``: their errors are
+    """Groups entered tied to the pose (``enter(..., blind="tied")``): ``(ids, G (n, 3), X)``: their errors are
     ``G (X_true − X)`` plus the prior's, ``X`` the pose they were entered from."""
 
 
@@ -125,11 +125,12 @@ class Method:
 
     def enter(self, ekf: JointEKF, front: FrontEnd, model: FrameLandmarks | None, used_pairs: set[int],
               camera: StereoCamera, world_map: Map, frame: int, config: Config, *,
-              closed_planes: frozenset[str] = frozenset(), tied: bool = False) -> Entered:
+              closed_planes: frozenset[str] = frozenset(), blind: str | None = None) -> Entered:
         """Enter the frame's new wall landmarks, jointly per boundary (:func:`enter_wall_landmarks`), on every wall
-        but ``closed_planes`` (ids of walls whose landmarks in view this frame did not find); ``tied``: with the
-        cross-covariance to the pose their image positions imply (a frame that found none of the filter's
-        landmarks: the boundary they are measured from was told from other lines by the pose alone)."""
+        but ``closed_planes`` (ids of walls whose landmarks in view this frame did not find). ``blind``: a frame that
+        found none of the filter's landmarks, whose boundaries were told from other lines by the pose alone, enters
+        them ``"tied"`` (with the cross-covariance to the pose their image positions imply) or ``"widened"`` (with
+        the pose's variance along the wall, uncorrelated); None: as the map's."""
         fresh = [c for c in self.take(model) if c.pair not in used_pairs and c.plane_id not in closed_planes
                  and not is_duplicate(ekf, c)]
         pairs = front.kept_pairs
@@ -137,7 +138,7 @@ class Method:
         centre = camera.optical_centres(ekf.pose)[0]
         along = {c.pair: int(wall_polarity(int(polarity[c.pair]), world_map[c.plane_id], centre)) for c in fresh}
         return enter_wall_landmarks(ekf, world_map, fresh, frame, along, config.landmarks.filter_boundary_sigma,
-                                    tied_camera=camera if tied else None, widen=tied == "widen")
+                                    tied_camera=camera if blind else None, widen=blind == "widened")
 
 
 class PlaneNoSelection(Method):
@@ -159,7 +160,7 @@ class AllSegments(Method):
         return None
 
     def enter(self, ekf, front, model, used_pairs, camera, world_map, frame, config, *,
-              closed_planes=frozenset(), tied=False) -> Entered:
+              closed_planes=frozenset(), blind=None) -> Entered:
         pairs = front.kept_pairs
         idx = [j for j in range(len(pairs)) if j not in used_pairs]
         ids = enter_point_landmarks(ekf, camera, pairs, idx, frame)

@@ -58,10 +58,9 @@ def inflate_inconsistent(ekf: JointEKF, observations: Sequence[tuple[int, Sequen
     z = np.asarray([np.asarray(u, dtype=float) for _, u in observations]).reshape(-1)
     h_fn, H = ekf.observation_model(ids, pan)
     nu = z - h_fn(ekf.state)
-    P = ekf._P  # read only
-    S = H @ P @ H.T + np.kron(np.eye(len(ids)), ekf._R1)
+    S = H @ ekf.cov @ H.T + ekf.camera.sigma_img**2 * np.eye(len(z))
     A = H[:, :3]
-    # the directions: each group with at least two observed members, and each landmark alone
+    # the directions: each group and each wall with at least two observed members, and each landmark alone
     members: dict[int, list[int]] = {}
     for i in ids:
         if i in groups:
@@ -98,9 +97,7 @@ def inflate_inconsistent(ekf: JointEKF, observations: Sequence[tuple[int, Sequen
         alpha = float((q[k] ** 2 - info[k]) / info[k] ** 2)
         if not alpha > 0:  # t ≤ 1: nothing is missing (only with p near 1)
             break
-        v = V[:, k]
-        idx = np.flatnonzero(v)
-        ekf._P[np.ix_(idx, idx)] += alpha  # P + α v vᵀ on the direction's entries (v is 0/1)
+        ekf.add_landmark_variance(directions[k][0], alpha)
         S = S + alpha * np.outer(Hv[:, k], Hv[:, k])
         done.add(k)
         out.append(Inflation(directions[k][0], float(t[k]), alpha, directions[k][1]))

@@ -201,6 +201,9 @@ class EKFConfig:
         for name in ("edge_updates", "wall_updates", "tie_blind_entries", "widen_blind_entries"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(expected("true or false", getattr(self, name), where=f"ekf.{name}"))
+        if self.tie_blind_entries and self.widen_blind_entries:
+            raise ConfigError("ekf.tie_blind_entries and ekf.widen_blind_entries: expected at most one of them true "
+                              "(two ways to enter the same landmarks)")
         if isinstance(self.inflation_p, bool) or not isinstance(self.inflation_p, int | float) or \
                 not 0.0 <= self.inflation_p < 1.0:
             raise ConfigError(expected("a probability in [0, 1) (0: off)", self.inflation_p, where="ekf.inflation_p"))
@@ -777,7 +780,10 @@ class JointEKF:
 
     def landmark_position(self, landmark_id: int) -> np.ndarray:
         """(2,) map-frame ``(x, y)`` [m] of a landmark."""
-        r = int(self._rows([landmark_id], "landmark_position")[0])
+        return self._position_of_row(int(self._rows([landmark_id], "landmark_position")[0]))
+
+    def _position_of_row(self, r: int) -> np.ndarray:
+        """:meth:`landmark_position` of state row ``r``."""
         return self._start[r] + self._J_p_l[r] @ self._x[self._idx2[r]]
 
     def landmark_cov2d(self, landmark_id: int) -> np.ndarray:
@@ -842,6 +848,16 @@ class JointEKF:
             raise InputError(expected("a factor >= 1", factor, where="inflate_pose.factor"))
         k = 2 if position_only else 3
         self._P[:k, :k] *= factor
+
+    def add_landmark_variance(self, landmark_ids: Sequence[int], variance: float) -> None:
+        """Add ``variance`` [m²] along the common shift of the wall landmarks ``landmark_ids``: ``P ← P + α v vᵀ``
+        with ``v`` 1 on each of their ``s`` (an error they share, or one landmark's own, larger than their
+        covariance held; :func:`~stablemarks.estimation.consistency.inflate_inconsistent`). ``α ≥ 0``: ``P`` stays
+        PSD."""
+        if not (np.isfinite(variance) and variance >= 0):
+            raise InputError(expected("a non-negative variance", variance, where="add_landmark_variance"))
+        idx = np.array([self._idx2[r, 0] for r in self._rows(list(landmark_ids), "add_landmark_variance")])
+        self._P[np.ix_(idx, idx)] += variance
 
     def reset_pose(self, pose, cov_pose) -> None:
         """Replace the pose estimate by one made without the landmarks (dead reckoning, when the images can no
@@ -1411,7 +1427,7 @@ class JointEKF:
                     continue
                 f2 = floor
                 if per_m > 0:  # the floor at this landmark's range from the camera
-                    rng = float(np.hypot(*(self._start[r] + self._J_p_l[r] @ self._x[self._idx2[r]] - centre)))
+                    rng = float(np.hypot(*(self._position_of_row(r) - centre)))
                     f2 = (self.config.landmark_sigma_floor + per_m * rng) ** 2
                 if self._P[i, i] < f2:
                     self._P[i, i] = f2  # adds floor − P_ii ≥ 0 on the diagonal: P stays PSD

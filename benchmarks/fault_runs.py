@@ -1,6 +1,7 @@
 """The faults of the health issue on sequences made here: a slip or kidnap, a wrong pan, a pan left out.
 
-For each scenario, simulates its run (`stablemarks simulate`, the scenario's seed or --seed), writes the clean
+For each scenario, simulates its run (`stablemarks simulate`, the scenario's seed or --seed; the head pointed by
+the method, or with `--head scenario` by the scenario's rule on dead reckoning, as `simulate --head`), writes the clean
 sequence and the edited ones, runs `stablemarks run` on each and prints one line per run: the ATE against dead
 reckoning's [mm], the first `warning:` line's frame and condition, the frame of the first one that names the
 pan (0 for the warning before the first frame that the recording gives no pans), the final position NEES (2 dof,
@@ -31,6 +32,7 @@ from stablemarks.cli import main as cli
 from stablemarks.sim.export import write_simulated_sequence
 from stablemarks.sim.run import simulate_run
 from stablemarks.sim.scenario import load_scenario
+from stablemarks.sim.source import steered_by_method
 
 FAULTS = ("clean", "kidnap", "kidnap-x", "kidnap-neg", "kidnap25", "pan", "nopan")
 
@@ -105,6 +107,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, help="seed of the runs (default: each scenario's own)")
     ap.add_argument("--keep", help="write the sequences and outputs here (default: a temporary folder)")
     ap.add_argument("--config", help="configuration YAML for every run (default: the defaults)")
+    ap.add_argument("--head", choices=("method", "scenario"), default="method",
+                    help="who points the head in the clean run (as `stablemarks simulate --head`)")
     args = ap.parse_args()
     faults = args.faults.split(",")
     unknown = [f for f in faults if f not in FAULTS]
@@ -116,7 +120,10 @@ def main() -> None:
               f"{'after jump / DR [mm]':>20s}  warnings")
         for name in args.scenarios:
             sc = load_scenario(name)
-            clean = write_simulated_sequence(simulate_run(sc, args.seed), root / f"{sc.name}-clean")
+            sim = simulate_run(sc, args.seed)
+            if args.head == "method":
+                sim = steered_by_method(sim)
+            clean = write_simulated_sequence(sim, root / f"{sc.name}-clean")
             for fault in faults:
                 seq, jump = (clean, None) if fault == "clean" else make_fault(clean, fault, root / f"{sc.name}-{fault}")
                 if seq is None:

@@ -12,7 +12,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from ..errors import InputError, expected
 from ..io.sequence import FRAME_PERIOD
-from ..sim import builtin_scenarios, load_scenario, simulate_run
+from ..sim import builtin_scenarios, load_scenario, simulate_run, steered_by_method
 from ..sim.export import write_simulated_sequence
 
 NAME = "simulate"
@@ -21,7 +21,8 @@ DESCRIPTION = (
     "Simulate the robot's run through SCENARIO (a built-in name such as 'lab', or a scenario YAML file), "
     "render every stereo frame, and write DIR as a recorded-sequence folder that `stablemarks run DIR` "
     "reads: sequence.yaml, calib/ (ROS camera_info pair and mount), map.yaml, left/ and right/ PNGs, "
-    f"frames.csv (stamps {FRAME_PERIOD:g} s apart, head pans), odometry.csv (the noisy wheel odometry, "
+    f"frames.csv (stamps {FRAME_PERIOD:g} s apart, head pans: by default those the method's pan policy "
+    "commands while the run is simulated, see --head), odometry.csv (the noisy wheel odometry, "
     "integrated), and beside them the ground truth: groundtruth.tum (true poses, for evo) and "
     "groundtruth.json (per-frame truth of every image edge). The seed fixes odometry and image noise. "
     "DIR is written under a temporary name and appears only when complete."
@@ -36,6 +37,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="seed of the run (default: the scenario's seed)")
     parser.add_argument("--frames", default="all", metavar="N|all",
                         help="write the first N frames of the run, or all of them (default)")
+    parser.add_argument("--head", choices=("method", "scenario"), default="method",
+                        help="who points the stereo head: 'method' (default) runs the localizer while simulating "
+                             "and records the pans its pan policy commands, as on a robot whose localizer steers "
+                             "its head; 'scenario' applies the scenario's pan rule to the dead-reckoning pose "
+                             "(the drifting belief of a robot without a localizer)")
     parser.add_argument("--force", action="store_true", help="replace DIR if it is an existing sequence folder")
 
 
@@ -66,9 +72,12 @@ def run(args: argparse.Namespace) -> int:
 
     console = Console(soft_wrap=True, highlight=False)
     start = time.perf_counter()
-    with Progress(TextColumn("rendering"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   console=console, transient=True) as progress:
-        task = progress.add_task("frames", total=n)
+        if args.head == "method":
+            steer = progress.add_task("steering the head", total=n)
+            sim = steered_by_method(sim, n, progress=lambda k, _n: progress.update(steer, completed=k))
+        task = progress.add_task("rendering", total=n)
         out = write_simulated_sequence(sim, args.out, n_frames=n, force=args.force,
                                        on_frame=lambda _k: progress.advance(task))
     elapsed = time.perf_counter() - start
@@ -79,7 +88,9 @@ def run(args: argparse.Namespace) -> int:
     cam = scenario.camera
     console.print(
         f"Scenario [bold]{scenario.name}[/bold] ({scenario.source}), seed {sim.seed}: {n} of {len(sim)} stereo "
-        f"frames ({cam.width}x{cam.height} px) rendered in {elapsed:.1f} s, {FRAME_PERIOD:g} s apart; the robot "
+        f"frames ({cam.width}x{cam.height} px) rendered in {elapsed:.1f} s (the head pointed by the "
+        f"{'method' if args.head == 'method' else 'scenario rule on dead reckoning'}), {FRAME_PERIOD:g} s apart; "
+        f"the robot "
         f"drives {length:.2f} m and its odometry drifts {drift:.3f} m by the last frame. "
         f"Wrote the sequence folder {out}/ (sequence.yaml, calib/, map.yaml, left/, right/, frames.csv, "
         f"odometry.csv) with its ground truth (groundtruth.tum, groundtruth.json); "

@@ -9,7 +9,7 @@
 from .render import Renderer, SimFrame, render_stereo
 from .run import Run, simulate_run
 from .scenario import Scenario, builtin_scenarios, load_scenario, parse_scenario
-from .source import SimulatedSource
+from .source import SimulatedSource, steered_by_method
 from .truth import EdgeTruth, FrameTruth, frame_truth
 
 __all__ = [
@@ -26,4 +26,5 @@ __all__ = [
     "parse_scenario",
     "render_stereo",
     "simulate_run",
+    "steered_by_method",
 ]

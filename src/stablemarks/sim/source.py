@@ -84,3 +84,23 @@ class SimulatedSource:
 
     def close(self) -> None:
         """Nothing to release."""
+
+
+def steered_by_method(run: Run, n_frames: int | None = None, *, config=None,
+                      progress: Callable[[int, int], None] | None = None) -> Run:
+    """``run`` with the pans its head takes when the method points it: the first ``n_frames`` frames (all by
+    default) rendered and run through a :class:`~stablemarks.Localizer` that commands each frame's pan
+    (:meth:`~stablemarks.Localizer.command_pan`, the configuration's ``pan`` section; ``config`` default: the
+    defaults with the scenario's odometry noise and pan policy), as a robot whose localizer steers its head.
+    The run's own pans (the scenario's rule applied to dead reckoning, :func:`~stablemarks.sim.run.simulate_run`)
+    follow the robot's drifting belief; after a few metres they point the head where the walls are not, and a
+    sequence recorded with them goes blind where the method would not (office: no landmark seen for 18 frames
+    from frame 62). The frames after ``n_frames`` keep the run's pans. ``progress(k, n)`` after each frame."""
+    from ..online import run_online
+
+    n = len(run) if n_frames is None else int(n_frames)
+    source = SimulatedSource(run, frames=n)
+    pans: list[float] = []
+    run_online(source, config=config, keep="nothing", progress=progress,
+               observers=[lambda frame, _est, _loc: pans.append(float(frame.pan))])
+    return dataclasses.replace(run, pans=tuple(pans) + tuple(run.pans[n:]))

@@ -103,6 +103,9 @@ class EKFConfig:
     gate_probability : probability mass of the χ² gate (2 dof) on an association's Mahalanobis distance.
     max_updates_per_frame : ``k``, how many associated landmarks update the state per frame (the paper's
         "several, less uncertain landmarks", Sec 5), chosen by :meth:`JointEKF.select_for_update`.
+    update_selection : how those ``k`` are chosen: ``"individual"`` (the ``k`` with the largest information gain
+        about the pose each on its own) or ``"joint"`` (greedily, each the one that adds most to what those already
+        chosen give: six landmarks that each pin the heading best are not the six that pin the pose best).
     margin_px : a landmark is a candidate for association only if both its predicted columns lie this
         far inside the image [px].
     max_missed : a wall landmark predicted in view on a wall modelled in the frame but not associated for this
@@ -184,6 +187,7 @@ class EKFConfig:
 
     gate_probability: float = 0.99
     max_updates_per_frame: int = 6
+    update_selection: str = "individual"
     margin_px: float = 0.0
     max_missed: int = 5
     recheck_sigma: float = 3.0
@@ -210,6 +214,8 @@ class EKFConfig:
         if not 0.0 < self.gate_probability < 1.0:
             raise ConfigError(expected("a probability in (0, 1)", self.gate_probability,
                                        where="ekf.gate_probability"))
+        if self.update_selection not in ("individual", "joint"):
+            raise ConfigError(expected("'individual' or 'joint'", self.update_selection, where="ekf.update_selection"))
         k = self.max_updates_per_frame
         if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
             raise ConfigError(expected("a positive integer", k, where="ekf.max_updates_per_frame"))
@@ -563,6 +569,76 @@ def _sequential_trials(P, H5, idx5, var_img, nu, order_r, order_c, gates, start,
             used_r[r] = True
             used_c[col] = True
             n += 1
+
+
+@njit(cache=True)
+def _greedy_joint(M, k):  # pragma: no cover - numba
+    """:meth:`JointEKF._joint_selection`'s greedy picks on ``M`` (3 + 2m, 3 + 2m), the joint covariance of the pose
+    and the m stacked observations (overwritten: conditioned on each pick in turn). Returns the picks (k,), or an
+    empty array where a pose or observation covariance is not positive definite."""
+    n = M.shape[0]
+    m = (n - 3) // 2
+    taken = np.zeros(m, np.bool_)
+    out = np.empty(k, np.int64)
+    for step in range(k):
+        # the pose's inverse covariance, by Cholesky
+        a00, a10, a11 = M[0, 0], M[1, 0], M[1, 1]
+        a20, a21, a22 = M[2, 0], M[2, 1], M[2, 2]
+        if not a00 > 0.0:
+            return out[:0]
+        l00 = np.sqrt(a00)
+        l10, l20 = a10 / l00, a20 / l00
+        e11 = a11 - l10 * l10
+        if not e11 > 0.0:
+            return out[:0]
+        l11 = np.sqrt(e11)
+        l21 = (a21 - l20 * l10) / l11
+        e22 = a22 - l20 * l20 - l21 * l21
+        if not e22 > 0.0:
+            return out[:0]
+        l22 = np.sqrt(e22)
+        best, best_gain = -1, -np.inf
+        for j in range(m):
+            if taken[j]:
+                continue
+            r0, r1 = 3 + 2 * j, 4 + 2 * j
+            s00, s01, s11 = M[r0, r0], M[r0, r1], M[r1, r1]
+            g00, g01, g11 = s00, s01, s11
+            for a in range(2):
+                ra = r0 + a
+                w0 = M[0, ra] / l00
+                w1 = (M[1, ra] - l10 * w0) / l11
+                w2 = (M[2, ra] - l20 * w0 - l21 * w1) / l22
+                if a == 0:
+                    v0, v1, v2 = w0, w1, w2
+                    g00 -= w0 * w0 + w1 * w1 + w2 * w2
+                else:
+                    g01 -= v0 * w0 + v1 * w1 + v2 * w2
+                    g11 -= w0 * w0 + w1 * w1 + w2 * w2
+            d_s = s00 * s11 - s01 * s01
+            d_x = g00 * g11 - g01 * g01
+            if not (d_s > 0.0 and d_x > 0.0):
+                return out[:0]
+            gain = 0.5 * (np.log(d_s) - np.log(d_x))
+            if gain > best_gain:  # the first of equal gains: the caller's order
+                best, best_gain = j, gain
+        out[step] = best
+        taken[best] = True
+        # condition M on the pick: M -= M[:, b] S_b^-1 M[b, :]
+        r0, r1 = 3 + 2 * best, 4 + 2 * best
+        s00, s01, s11 = M[r0, r0], M[r0, r1], M[r1, r1]
+        det = s00 * s11 - s01 * s01
+        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+        c0 = M[:, r0].copy()
+        c1 = M[:, r1].copy()
+        for p in range(n):
+            u0 = i00 * c0[p] + i01 * c1[p]
+            u1 = i01 * c0[p] + i11 * c1[p]
+            for q in range(p, n):
+                v = M[p, q] - (u0 * c0[q] + u1 * c1[q])
+                M[p, q] = v
+                M[q, p] = v
+    return out
 
 
 GAIN_RANK_TOL = 1e-6
@@ -1279,6 +1355,10 @@ class JointEKF:
         k = self.config.max_updates_per_frame if k is None else int(k)
         if not pairs:
             return []
+        if self.config.update_selection == "joint" and len(pairs) > k:
+            order = self._joint_selection([p[0] for p in pairs], pan, k)
+            if order is not None:
+                return [pairs[i] for i in order]
         terms = self._information_terms([p[0] for p in pairs], pan)
         gain = _closed_form_gains(*terms)
         order = np.argsort(-gain, kind="stable")
@@ -1290,6 +1370,38 @@ class JointEKF:
         if not (np.isfinite(g).all() and (gaps > GAIN_RANK_TOL * (1.0 + np.abs(g[1:][: k]))).all()):
             order = np.argsort(-self._information_gain(*terms), kind="stable")
         return [pairs[i] for i in order[:k]]
+
+    def joint_information(self, ids: Sequence[int], pan: float = 0.0) -> float:
+        """Expected information [nat] the observations of landmarks ``ids`` *together* give about the pose:
+        ``½ log det P_XX / det P_XX|z_ids``, with every correlation between them (their landmarks' and the
+        pose's) counted; for one landmark it is :meth:`information_gain`."""
+        P_XX, C, S = self._observation_joint(list(ids), pan)
+        post = P_XX - C @ np.linalg.solve(S, C.T)
+        return 0.5 * float(np.linalg.slogdet(P_XX)[1] - np.linalg.slogdet(post)[1])
+
+    def _observation_joint(self, ids: list[int], pan: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(P_XX (3, 3), C = Cov(X, z) (3, 2m), S = Cov(z) (2m, 2m))`` of the stacked predicted observations of
+        ``ids`` (``(u_l, u_r)`` each), with their cross-covariances: ``S = H P Hᵀ + R``, ``C = P_X· Hᵀ``."""
+        rows = self._rows(ids, "select_for_update")
+        _, J_I_X, J_I_l = self._project(rows, self._x, self._camera(pan))
+        idx = self._idx5(rows)  # (m, 5): the pose's three and the landmark's two state indices
+        H = np.concatenate([J_I_X, J_I_l], axis=2)  # (m, 2, 5)
+        m = len(rows)
+        blocks = self._P[idx[:, None, :, None], idx[None, :, None, :]]  # (m, m, 5, 5)
+        S = np.einsum("iab,ijbc,jdc->iajd", H, blocks, H).reshape(2 * m, 2 * m) + self._R1[0, 0] * np.eye(2 * m)
+        C = np.einsum("xjb,jab->xja", self._P[:3][:, idx], H).reshape(3, 2 * m)
+        return self._P[:3, :3].copy(), C, 0.5 * (S + S.T)
+
+    def _joint_selection(self, ids: list[int], pan: float, k: int) -> list[int] | None:
+        """Indices into ``ids`` of ``k`` landmarks chosen greedily by joint information about the pose
+        (``ekf.update_selection: joint``): each step takes the landmark whose observation, given those already
+        taken, reduces ``log det P_XX`` most (the conditional gain has :meth:`information_gain`'s closed form on the
+        covariance of the pose and the remaining observations conditioned on the chosen ones; a rank-2 Schur
+        update per step). The first is :meth:`information_gain`'s best. None where the pose covariance or a
+        conditioned observation covariance is not positive definite (the caller ranks individually)."""
+        P_XX, C, S = self._observation_joint(ids, pan)
+        picks = _greedy_joint(np.block([[P_XX, C], [C.T, S]]), min(k, len(ids)))
+        return [int(j) for j in picks] if len(picks) else None
 
     # ----------------------------------------------------------------- update
     def _map_cost(self, rows: np.ndarray, idx: np.ndarray, z: np.ndarray, x0: np.ndarray, camera: StereoCamera):

@@ -69,7 +69,7 @@ def test_joint_selection_is_greedy_on_random_filters():
     for _ in range(5):
         ekf, _ = random_filter(rng)
         ids = ekf.landmark_ids
-        order = ekf._joint_selection(ids, 0.0, 3)
+        order = ekf.joint_selection(ids, 0.0, 3)
         assert order is not None and len(set(order)) == 3
         for n in range(3):
             before = [ids[j] for j in order[:n]]
@@ -86,3 +86,21 @@ def test_update_selection_is_checked():
         parse_config({"ekf": {"update_selection": 3}})
     assert parse_config({"ekf": {"update_selection": "joint"}}).ekf.update_selection == "joint"
     assert Config().ekf.update_selection == "individual"
+
+
+def test_the_information_pan_policy_weighs_what_the_update_would_take():
+    """With the joint choice, a view's expected information is what the k landmarks the filter would update with
+    give together (:func:`stablemarks.viewing.expected_information`), not the sum of their gains alone."""
+    from stablemarks.viewing import expected_information
+
+    from .test_estimation import WORLD
+
+    ekf, ids = redundant_filter()
+    ekf_k2 = JointEKF(CAM, X0, ekf.cov_pose, EKFConfig(update_selection="joint", max_updates_per_frame=2))
+    ekf_k2.add_landmarks([NewLandmark.wall(WALL, s) for s in (1.20, 1.22, 2.6)], np.diag([0.002, 0.002, 0.003]) ** 2)
+    got = expected_information(ekf_k2, WORLD, CAM, X0, 0.0, 0.0)
+    picks = [ids[j] for j in ekf_k2.joint_selection(ids, 0.0, 2)]
+    assert got == pytest.approx(ekf_k2.joint_information(picks), rel=1e-12)
+    individual, _ = redundant_filter("individual")
+    alone = expected_information(individual, WORLD, CAM, X0, 0.0, 0.0)
+    assert alone == pytest.approx(float(np.sum(np.sort(individual.information_gain(ids))[::-1][:6])), rel=1e-12)

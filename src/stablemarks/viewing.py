@@ -104,8 +104,10 @@ def expected_information(ekf, world_map: Map, camera: StereoCamera, X, pan: floa
     """What a frame taken at pose ``X`` with the head at ``pan`` promises [nat]: the sum of the
     ``ekf.config.max_updates_per_frame`` largest expected information gains about the pose
     (:meth:`JointEKF.information_gain`, each ``½ log det P_XX / det P_XX|z``) of the landmarks predicted inside
-    both images, plus ``new_edge_value`` for every free edge of a reference plane in view (in the image, on its
-    wall's visible side, not hidden by another wall) whose wall holds no landmark. With ``max_incidence`` [rad],
+    both images (with ``ekf.update_selection: joint``, the information those the filter would choose give
+    together, :meth:`JointEKF.joint_information`), plus ``new_edge_value`` for every free edge of a reference
+    plane in view (in the image, on its wall's visible side, not hidden by another wall) whose wall holds no
+    landmark. With ``max_incidence`` [rad],
     landmarks and free edges on walls seen more obliquely count for nothing (they are neither associated nor
     modelled: :meth:`JointEKF.visible`, ``landmarks.max_incidence_deg``)."""
     total = 0.0
@@ -113,9 +115,16 @@ def expected_information(ekf, world_map: Map, camera: StereoCamera, X, pan: floa
     if ids:
         with ekf.linearised_at(X):
             seen = [int(i) for i in ekf.visible(pan, max_incidence)]
+            k = ekf.config.max_updates_per_frame
+            if seen and ekf.config.update_selection == "joint":
+                # what the k the filter would update with give together (ekf.update_selection)
+                order = ekf.joint_selection(seen, pan, k) if len(seen) > k else list(range(len(seen)))
+                if order is not None:
+                    total += ekf.joint_information([seen[j] for j in order], pan)
+                    seen = []
             if seen:
                 gains = np.sort(ekf.information_gain(seen, pan))[::-1]
-                total += float(np.sum(gains[: ekf.config.max_updates_per_frame]))
+                total += float(np.sum(gains[:k]))
     if new_edge_value > 0:
         cam = camera.with_pan(pan)
         centre = cam.optical_centres(X)[0]

@@ -573,7 +573,7 @@ def _sequential_trials(P, H5, idx5, var_img, nu, order_r, order_c, gates, start,
 
 @njit(cache=True)
 def _greedy_joint(M, k):  # pragma: no cover - numba
-    """:meth:`JointEKF._joint_selection`'s greedy picks on ``M`` (3 + 2m, 3 + 2m), the joint covariance of the pose
+    """:meth:`JointEKF.joint_selection`'s greedy picks on ``M`` (3 + 2m, 3 + 2m), the joint covariance of the pose
     and the m stacked observations (overwritten: conditioned on each pick in turn). Returns the picks (k,), or an
     empty array where a pose or observation covariance is not positive definite."""
     n = M.shape[0]
@@ -1356,7 +1356,7 @@ class JointEKF:
         if not pairs:
             return []
         if self.config.update_selection == "joint" and len(pairs) > k:
-            order = self._joint_selection([p[0] for p in pairs], pan, k)
+            order = self.joint_selection([p[0] for p in pairs], pan, k)
             if order is not None:
                 return [pairs[i] for i in order]
         terms = self._information_terms([p[0] for p in pairs], pan)
@@ -1392,7 +1392,7 @@ class JointEKF:
         C = np.einsum("xjb,jab->xja", self._P[:3][:, idx], H).reshape(3, 2 * m)
         return self._P[:3, :3].copy(), C, 0.5 * (S + S.T)
 
-    def _joint_selection(self, ids: list[int], pan: float, k: int) -> list[int] | None:
+    def joint_selection(self, ids: list[int], pan: float, k: int) -> list[int] | None:
         """Indices into ``ids`` of ``k`` landmarks chosen greedily by joint information about the pose
         (``ekf.update_selection: joint``): each step takes the landmark whose observation, given those already
         taken, reduces ``log det P_XX`` most (the conditional gain has :meth:`information_gain`'s closed form on the

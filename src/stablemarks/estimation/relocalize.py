@@ -136,6 +136,17 @@ def pose_from_lines(camera: StereoCamera, landmarks: np.ndarray, ids, u_left, u_
     return LineRelocation(refined[best].copy(), inliers, runner_up)
 
 
+def lines_score(camera: StereoCamera, pose, landmarks: np.ndarray, u_left, u_right, tol_px: float) -> int:
+    """How many of ``landmarks`` (n, 2) robot pose ``pose`` (3,) puts within ``tol_px`` of one of the frame's lines
+    ``(u_left, u_right)`` in both images (:func:`pose_from_lines`'s score of a pose)."""
+    P = np.asarray(landmarks, dtype=float).reshape(-1, 2)
+    u_l, u_r = np.asarray(u_left, dtype=float), np.asarray(u_right, dtype=float)
+    if not len(P) or not len(u_l):
+        return 0
+    counts, _ = _score(camera, np.asarray(pose, dtype=float).reshape(1, 3), P, u_l, u_r, tol_px)
+    return int(counts[0])
+
+
 def _rotate(angle, v) -> np.ndarray:
     """Vectors ``v`` (h, 2) or one vector (2,) turned by ``angle`` (h,) [rad]: (h, 2)."""
     c, s = np.cos(angle), np.sin(angle)

@@ -28,7 +28,8 @@ condition's name first):
     is found at all (a kidnap that moved the walls beyond even the widened bands) in ``relocalize_frames`` frames
     in a row while the walls fitted in the frame disagree with the pose, or a frame finds fewer than half the
     landmarks in view, the pose is re-initialised where the frame's own lines put the most landmarks, within
-    ``relocalize_radius`` (:func:`stablemarks.estimation.relocalize.pose_from_lines`), else the walls fitted in
+    ``relocalize_radius`` (:func:`stablemarks.estimation.relocalize.pose_from_lines`; after a frame that found
+    some, only where twice as many lie on a line as at the pose those found give), else the walls fitted in
     the frame, their slopes in agreement with the map, relocalize a copy of the filter across them; either is
     kept, and the condition holds, only if a pattern of ``min_pattern`` landmarks then associates and fits
     (``Localizer._relocalize``).

@@ -507,7 +507,7 @@ class Localizer:
             return None  # the walls are where the pose puts them: not a kidnap
         return nu, H, R
 
-    def _local_pose(self, assoc, front: FrontEnd, pan: float, frame: int) -> np.ndarray | None:
+    def _local_pose(self, assoc, front: FrontEnd, pan: float) -> np.ndarray | None:
         """The pose the frame's own associations ``assoc`` put the robot at: the filter's updated with all of them
         (on a copy), or None without any."""
         if not assoc:
@@ -515,14 +515,13 @@ class Localizer:
         pairs = front.kept_pairs
         probe = self.ekf.copy()
         try:
-            probe.update([(i, (pairs.u_left[j], pairs.u_right[j])) for i, j in assoc], pan, frame=frame,
+            probe.update([(i, (pairs.u_left[j], pairs.u_right[j])) for i, j in assoc], pan,
                          iterations=self.config.ekf.iterations)
         except GeometryError:
             return None
         return probe.pose
 
-    def _relocalize(self, walls, front: FrontEnd, cam_k: StereoCamera, pan: float, found_here: int | None = None,
-                    local: np.ndarray | None = None):
+    def _relocalize(self, walls, front: FrontEnd, cam_k: StereoCamera, pan: float, found: list | None = None):
         """Relocalize when no landmark was found where the pose puts them in ``health.relocalize_frames`` frames
         in a row while the walls fitted in the frame disagreed with it (:meth:`_walls_offsets`).
 
@@ -542,7 +541,7 @@ class Localizer:
            (:meth:`JointEKF.update_pose`). Two parallel walls fix the position across them and the heading
            together, so this alone can turn the heading (the room: 13° off after a 0.5 m slip).
         """
-        ways = [("lines", lambda: self._relocation_from_lines(front, cam_k, found_here, local))]
+        ways = [("lines", lambda: self._relocation_from_lines(front, cam_k, pan, found))]
         if walls is not None:
             ways.append(("walls", lambda: self._relocation_from_walls(walls)))
         for how, way in ways:
@@ -573,14 +572,14 @@ class Localizer:
         probe.update_pose(nu, H, R)
         return probe, factor
 
-    def _relocation_from_lines(self, front: FrontEnd, cam_k: StereoCamera, found_here: int | None = None,
-                               local: np.ndarray | None = None) -> tuple[JointEKF | None, float]:
+    def _relocation_from_lines(self, front: FrontEnd, cam_k: StereoCamera, pan: float, found: list | None = None
+                               ) -> tuple[JointEKF | None, float]:
         """A copy of the filter re-initialised at the pose that puts the most landmarks on the frame's lines
         (:meth:`_relocalize`, way 1), and the factor by which its position variance exceeds the prior's; or
-        ``(None, 1)``. With ``found_here`` (the landmarks the frame associated where the pose puts them), the pose
+        ``(None, 1)``. With ``found`` (the associations the frame made where the pose puts the landmarks), the pose
         must put two more than that on a line, and lie beyond the prior's 99.9 % bound (otherwise the frame is no
-        evidence of a slip or a kidnap). With ``local`` (the pose those associations update the filter to,
-        :meth:`_local_pose`), it must also put two more on a line than ``local`` does, scored alike
+        evidence of a slip or a kidnap), and put at least twice as many on a line as the pose those associations
+        update the filter to (:meth:`_local_pose`, computed only when the rest holds) does, scored the same way
         (:func:`~stablemarks.estimation.relocalize.lines_score`): a scene of many evenly spaced lines puts
         landmarks on lines at other places too (the hall with ``noise.sigma_img`` 0.16, trial 1, frame 28: 5 of 11
         landmarks associated within the narrower gates, a place 0.12 m off with 10 on a line, relocalized there
@@ -598,25 +597,26 @@ class Localizer:
         P = np.array([ekf.landmark_position(i) for i in ids])
         pairs = front.kept_pairs
         tight = 3.0 * self.camera.sigma_img
-        found = pose_from_lines(cam_k, P, ids, pairs.u_left, pairs.u_right, ekf.pose, radius=h.relocalize_radius,
+        place = pose_from_lines(cam_k, P, ids, pairs.u_left, pairs.u_right, ekf.pose, radius=h.relocalize_radius,
                                 heading=3.0 * math.sqrt(ekf.cov_pose[2, 2]) + math.radians(1.0),
                                 tol_px=h.relocalize_tol_px, tight_px=tight, sigma_img=self.camera.sigma_img)
-        if found is None or len(found.inliers) < max(h.min_pattern + 1, found.runner_up + 2):
+        if place is None or len(place.inliers) < max(h.min_pattern + 1, place.runner_up + 2):
             return None, 1.0
-        if found_here is not None:
-            d = found.pose - ekf.pose
+        if found is not None:
+            d = place.pose - ekf.pose
             d[2] = float(wrap_angle(d[2]))
-            if len(found.inliers) < found_here + 2 or float(d @ np.linalg.solve(ekf.cov_pose, d)) <= POSE_GATE_CHI2:
+            if len(place.inliers) < len(found) + 2 or float(d @ np.linalg.solve(ekf.cov_pose, d)) <= POSE_GATE_CHI2:
                 return None, 1.0
-            if local is not None and len(found.inliers) < 2 * lines_score(cam_k, local, P, pairs.u_left,
+            local = self._local_pose(found, front, pan)
+            if local is not None and len(place.inliers) < 2 * lines_score(cam_k, local, P, pairs.u_left,
                                                                           pairs.u_right, tight):
                 return None, 1.0
-        depth = cam_k.to_camera(found.pose, P[[ids.index(i) for i in found.inliers]])[1]
+        depth = cam_k.to_camera(place.pose, P[[ids.index(i) for i in place.inliers]])[1]
         s_th = 3.0 * tight / cam_k.f
         s_xy = s_th * float(np.median(depth))
         cov = np.diag([s_xy**2, s_xy**2, s_th**2])
         probe = ekf.copy()
-        probe.reset_pose(found.pose, cov)
+        probe.reset_pose(place.pose, cov)
         return probe, max(1.0, float(np.trace(cov[:2, :2]) / np.trace(ekf.cov_pose[:2, :2])))
 
     def _walls_missed(self, model: FrameLandmarks | None, assoc, pan: float, record: FrameRecord) -> frozenset[str]:
@@ -932,8 +932,7 @@ class Localizer:
                 if 2 * len(assoc) < self.ekf.n_landmarks:  # else not fewer than half of those in view either
                     n_view = len(self.ekf.visible(pan, self._max_incidence))
                     if n_view > self.config.health.min_pattern and 2 * len(assoc) < n_view:
-                        relocated = self._relocalize(None, front, cam_k, pan, found_here=len(assoc),
-                                                     local=self._local_pose(assoc, front, pan, k))
+                        relocated = self._relocalize(None, front, cam_k, pan, found=assoc)
             if relocated is not None:
                 self.ekf, record.inflation, model, assoc, how = relocated
                 reinitialised = how == "lines"

@@ -1388,7 +1388,7 @@ class JointEKF:
         H = np.concatenate([J_I_X, J_I_l], axis=2)  # (m, 2, 5)
         m = len(rows)
         blocks = self._P[idx[:, None, :, None], idx[None, :, None, :]]  # (m, m, 5, 5)
-        S = np.einsum("iab,ijbc,jdc->iajd", H, blocks, H).reshape(2 * m, 2 * m) + self._R1[0, 0] * np.eye(2 * m)
+        S = np.einsum("iab,ijbc,jdc->iajd", H, blocks, H).reshape(2 * m, 2 * m) + self._var_img * np.eye(2 * m)
         C = np.einsum("xjb,jab->xja", self._P[:3][:, idx], H).reshape(3, 2 * m)
         return self._P[:3, :3].copy(), C, 0.5 * (S + S.T)
 

@@ -138,7 +138,8 @@ def pose_from_lines(camera: StereoCamera, landmarks: np.ndarray, ids, u_left, u_
 
 def lines_score(camera: StereoCamera, pose, landmarks: np.ndarray, u_left, u_right, tol_px: float) -> int:
     """How many of ``landmarks`` (n, 2) robot pose ``pose`` (3,) puts within ``tol_px`` of one of the frame's lines
-    ``(u_left, u_right)`` in both images (:func:`pose_from_lines`'s score of a pose)."""
+    ``(u_left, u_right)`` in both images (:func:`pose_from_lines`'s score of a pose, except that every line counts
+    here, also those it leaves out for not triangulating in front of the camera)."""
     P = np.asarray(landmarks, dtype=float).reshape(-1, 2)
     u_l, u_r = np.asarray(u_left, dtype=float), np.asarray(u_right, dtype=float)
     if not len(P) or not len(u_l):

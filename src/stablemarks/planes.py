@@ -540,9 +540,9 @@ def fit_plane(
     for _ in range(4):
         # the data's own spread, not the model's σ: disparity noise is often below σ_ν, and clutter
         # a few tens of cm in front of a wall is then still separable (the scale, the new inliers, their
-        # weights and points and the weights' sum in three calls: _reweight_sum)
-        scale, inl, wgt, s_in, o_in, sum_w = _reweight_sum(s, o, sigma_o, w_all, inl, float(a), float(b), float(s0),
-                                                           outlier_sigma)
+        # weights and points and the weights' sum in one call: _reweight_step, what _reweight_sum computes)
+        scale, inl, wgt, s_in, o_in, sum_w = _reweight_step(s, o, sigma_o, w_all, inl, float(a), float(b), float(s0),
+                                                            outlier_sigma)
         if len(wgt) < min_inliers:
             return FailedFit(plane, "too few pixels agree on one wall line", n)
         s0 = float(wgt @ s_in) / sum_w
@@ -550,7 +550,7 @@ def fit_plane(
         N_inv = _inverse_spd2(sum_w, sum_w_ds, w_ds @ ds)  # N = [[Σw, Σw·ds], [Σw·ds, Σw·ds²]]
         if N_inv is None:
             return FailedFit(plane, "wall seen over too short a span to fit", n)
-        a, b = (float(v) for v in N_inv @ np.array([wgt @ o_in, w_ds @ o_in]))
+        a, b = (N_inv @ np.array([wgt @ o_in, w_ds @ o_in])).tolist()
     # the final line's normalised residuals of the final inliers and, for the clustered covariance, each stripe's
     # score (see _clustered_cov)
     clustered = config.fit_covariance == "clustered"
@@ -645,6 +645,53 @@ def _reweight_sum(s, o, sigma_o, w_all, inl, a: float, b: float, s0: float, outl
     (:func:`_pairwise_sum`): ``(scale, inl, wgt, s_in, o_in, sum_w)``."""
     scale, new, wgt, s_in, o_in = _reweight(s, o, sigma_o, w_all, inl, a, b, s0, outlier_sigma)
     return scale, new, wgt, s_in, o_in, _pairwise_sum(wgt, 0, wgt.shape[0])
+
+
+@njit(cache=True)
+def _reweight_step(s, o, sigma_o, w_all, inl, a, b, s0, outlier_sigma):  # pragma: no cover - numba
+    """:func:`_reweight_sum` in one call (its four numba calls and the Python between them cost ~10 µs an iteration
+    of :func:`fit_plane`): :func:`_residuals`' arithmetic, with the extremes of the inliers' ``|res|`` taken on the
+    way (what :func:`_kth_and_below` first looks for), :func:`median`'s order statistics of them
+    (:func:`_kth_and_below_in`), the same scale, :func:`_inliers`' test with the mask and the kept weights and points
+    written in one pass (the arrays returned are the first ``count`` of arrays ``n`` long), and
+    :func:`_pairwise_sum` of the weights: the same values bit for bit."""
+    n = s.shape[0]
+    res = np.empty(n)
+    absres = np.empty(n)
+    m = 0
+    lo = 0.0
+    hi = 0.0
+    for i in range(n):
+        r = ((o[i] - a) - b * (s[i] - s0)) / sigma_o[i]
+        res[i] = r
+        if inl[i]:
+            v = abs(r)
+            absres[m] = v
+            if m == 0:
+                lo = v
+                hi = v
+            else:
+                lo = min(lo, v)
+                hi = max(hi, v)
+            m += 1
+    kth, below = _kth_and_below_in(absres[:m], m // 2, lo, hi)
+    med = kth if m % 2 else (below + kth) / 2
+    scale = max(1e-3, 1.4826 * med)
+    limit = outlier_sigma * scale
+    new = np.empty(n, dtype=np.bool_)
+    wgt = np.empty(n)
+    s_in = np.empty(n)
+    o_in = np.empty(n)
+    count = 0
+    for i in range(n):
+        keep = abs(res[i]) <= limit
+        new[i] = keep
+        if keep:
+            wgt[count] = w_all[i]
+            s_in[count] = s[i]
+            o_in[count] = o[i]
+            count += 1
+    return scale, new, wgt[:count], s_in[:count], o_in[:count], _pairwise_sum(wgt, 0, count)
 
 
 @njit(cache=True)
@@ -1062,6 +1109,13 @@ def _kth_and_below(x, k):  # pragma: no cover - numba
         v = x[i]
         lo = min(lo, v)
         hi = max(hi, v)
+    return _kth_and_below_in(x, k, lo, hi)
+
+
+@njit(cache=True)
+def _kth_and_below_in(x, k, lo, hi):  # pragma: no cover - numba
+    """:func:`_kth_and_below` of the numbers ``x`` whose least and largest are ``lo`` and ``hi``."""
+    n = x.shape[0]
     scale = _MEDIAN_BUCKETS / (hi - lo) if hi > lo else 0.0
     if not np.isfinite(scale):  # a span too small (or too large) for buckets: sort everything
         srt = np.sort(x)
@@ -1107,7 +1161,7 @@ def median(x: np.ndarray) -> float:
 def _inverse_spd2(p, q, r, max_cond: float = 1e12) -> np.ndarray | None:
     """Inverse of the symmetric positive semi-definite 2×2 matrix ``[[p, q], [q, r]]`` (given by its three numbers,
     taken as float64), None when its condition number (ratio of its eigenvalues) exceeds ``max_cond``."""
-    p, q, r = np.float64(p), np.float64(q), np.float64(r)
+    p, q, r = float(p), float(q), float(r)  # the same IEEE arithmetic as on np.float64, without its overhead
     det = p * r - q * q
     lam_max = 0.5 * (p + r) + np.hypot(0.5 * (p - r), q)
     if not lam_max > 0 or not det / lam_max * max_cond >= lam_max:  # the smaller eigenvalue is det / lam_max

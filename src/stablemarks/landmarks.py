@@ -650,13 +650,20 @@ def search_boundary(
     window where the map has no other wall beyond the edge, so that a textureless strip just inside the edge,
     a joint or a door frame, does not end the region early).
     """
+    return _search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px,
+                            border_sigma_px, bridge_px, _inner_columns(camera, fit.X, fit.plane, edge))
+
+
+def _search_boundary(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right: np.ndarray | None,
+                     members_u: np.ndarray, config: LandmarkConfig, plane_config: PlaneConfig, window_px: float,
+                     border_sigma_px, bridge_px: int | None, u_inner: np.ndarray) -> Boundary | None:
+    """:func:`search_boundary` with the wall's inner columns ``u_inner`` (:func:`_inner_columns` of the edge: which
+    way is "outward" in each image, from a point inside the wall towards the edge) already known."""
     w = boundary_window(config, window_px)
     pred = fit.prediction
     plane = fit.plane
     e = pred.edges[edge]
     X = fit.X
-    # Which way is "outward" in each image: from a point inside the wall towards the edge.
-    u_inner = _inner_columns(camera, X, plane, edge)
     u_b = np.zeros(2)
     var_b = np.zeros(2)
     rows_used = 0
@@ -743,12 +750,13 @@ def search_boundary(
     vb0, vb1 = var_b.tolist()
     cov_uv = np.array([[vb0 + var_w, var_w], [var_w, vb1 + var_w]])  # np.diag(var_b) + var_w
     sigma_u = np.sqrt(np.array([vb0 + var_w, vb1 + var_w]))
-    P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
+    # triangulate's branch for one column pair with a full covariance (_triangulate_one), called directly
+    P, cov = camera._triangulate_one(float(u_b[0]), float(u_b[1]), X, cov_uv)
     if not np.isfinite(P).all():
         # non-positive disparity from two independent searches: intersect the left ray with the plane
         d_here, _ = pred.disparity_at(u_b[0])
         u_b[1] = u_b[0] - float(d_here)
-        P, cov = camera.triangulate(u_b[0], u_b[1], X, cov_uv=cov_uv)
+        P, cov = camera._triangulate_one(float(u_b[0]), float(u_b[1]), X, cov_uv)
     P_hat, cov_hat = fit.fuse_point(P, cov)
     t = _inward(plane, edge)
     sigma_along = float(np.sqrt(t @ cov_hat @ t))
@@ -823,18 +831,31 @@ def model_features(
     k_l = k.tolist()
     P_model = P_edge + d_p[:, None] * t  # Eq 15, every candidate's (row j: P_edge + d_p[j] t)
     cov_model = var_s[:, None, None] * tt  # Eq 17: rank 1 along the wall
+    # the rows of the per-candidate arrays as lists of views (what ``a[j]`` gives), and each candidate made as
+    # _new_candidate makes it from a dict literal (a literal is built faster than ``dict(**kw)``; its keys, the same
+    # for every candidate, are checked once): ~1.5 µs a candidate instead of ~3
+    Pm_l, cm_l, Ph_l, ch_l = list(P_model), list(cov_model), list(P_hat), list(cov_hat)
+    J_l = [None] * len(k_l) if J_shared is None else list(J_shared)
+    plane_id, plane_label, sigma_b, sigma_bm = plane.id, plane.label, boundary.sigma_along, \
+        boundary.sigma_along_measured
     out = []
+    new = object.__new__
     for rank, j in enumerate(np.argsort(d_p, kind="stable").tolist()):
-        out.append(_new_candidate(dict(
-            plane_id=plane.id, plane_label=plane.label, index=rank + 1, pair=k_l[j], edge=edge, s=d_l[j],
-            sigma_b=boundary.sigma_along, sigma_f=sf_l[j],
-            P=P_model[j], cov=cov_model[j],
-            z_low=zl_l[j], z_high=zh_l[j], length_similarity=ls_l[j], u_left=ul_l[j], u_right=ur_l[j],
-            v_top=vt_l[j], v_bottom=vb_l[j], selected=False, reason="",
-            P_observed=P_hat[j], cov_observed=cov_hat[j], contrast=c_l[j],
-            sigma_b_measured=boundary.sigma_along_measured, wall_offset=G_l[j], sigma_wall_offset=sG_l[j],
-            sigma_wall_fit=sGf_l[j], height_margin=m_l[j], range=dist_l[j], incidence=inc_l[j],
-            shared_jacobian=None if J_shared is None else J_shared[j], shared_cov=cov_shared, sigma_own=so_l[j])))
+        values = {
+            "plane_id": plane_id, "plane_label": plane_label, "index": rank + 1, "pair": k_l[j], "edge": edge,
+            "s": d_l[j], "sigma_b": sigma_b, "sigma_f": sf_l[j], "P": Pm_l[j], "cov": cm_l[j],
+            "z_low": zl_l[j], "z_high": zh_l[j], "length_similarity": ls_l[j], "u_left": ul_l[j], "u_right": ur_l[j],
+            "v_top": vt_l[j], "v_bottom": vb_l[j], "selected": False, "reason": "",
+            "P_observed": Ph_l[j], "cov_observed": ch_l[j], "contrast": c_l[j],
+            "sigma_b_measured": sigma_bm, "wall_offset": G_l[j], "sigma_wall_offset": sG_l[j],
+            "sigma_wall_fit": sGf_l[j], "height_margin": m_l[j], "range": dist_l[j], "incidence": inc_l[j],
+            "shared_jacobian": J_l[j], "shared_cov": cov_shared, "sigma_own": so_l[j]}
+        if not out:
+            out.append(_new_candidate(values))
+            continue
+        c = new(Candidate)
+        c.__dict__.update(values)
+        out.append(c)
     return out
 
 
@@ -1488,18 +1509,21 @@ def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right
     rejected)``: ``found`` None when the edge is not searched, False when searched and not found, else the
     :func:`search_boundary` boundary; ``rejected`` the reasons (with no boundary) it was not searched for."""
     e = fit.prediction.edges[edge]
-    if not np.isfinite(e.u).all():  # the edge is behind the camera
+    u_l, u_r = e.u.tolist()
+    if not (math.isfinite(u_l) and math.isfinite(u_r)):  # the edge is behind the camera
         return None, []
-    lo, hi = e.window(0, config.search_sigma)
+    window_l = e.window(0, config.search_sigma)
+    lo, hi = window_l
     if hi < 0 or lo > camera.width - 1:
         return None, []
-    windows = [e.window(img, config.search_sigma) for img in (0, 1)]
+    windows = [window_l, e.window(1, config.search_sigma)]
     if valid_columns is not None and any(
         not (vc[0] + 1 < w[0] and w[1] < vc[1] - 1) for w, vc in zip(windows, valid_columns, strict=True)
     ):
         return None, []
+    d_edge = None  # the wall's predicted disparity and its σ at the edge's left column, when known
     if disparity_range is not None:
-        d, sd = fit.prediction.disparity_at(e.u[0])
+        d, sd = d_edge = fit.prediction.disparity_at(e.u[0])
         d_lo, d_hi = float(d - config.search_sigma * sd), float(d + config.search_sigma * sd)
         if d_hi > disparity_range[1] or d_lo < disparity_range[0]:
             return None, [(None, f"plane {fit.plane.label!r}: the wall's disparity at its free edge {edge} may "
@@ -1517,7 +1541,12 @@ def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right
     if world_map is not None:
         if edge_occluded(camera, fit.X, world_map, fit.plane, edge):
             return None, []
-        step = edge_depth_step(camera, fit.X, world_map, fit.plane, edge, window_px / 2 + 1)
+    # what the depth step, the gap and the search each computed of the edge: its inner columns and the camera's frame
+    u_inner = _inner_columns(camera, fit.X, fit.plane, edge)
+    frame = camera._frame(fit.X)
+    if world_map is not None:
+        step = _edge_depth_step(camera, fit.X, world_map, fit.plane, edge, window_px / 2 + 1, float(u_inner[0]),
+                                frame)
         if abs(step) < config.min_edge_step_sigma * plane_config.sigma_nu(camera):
             return None, []
     bridge = None
@@ -1525,10 +1554,10 @@ def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right
         # a hole is followed across up to the whole window, but never across the gap to another wall of the
         # map that would continue the region (less one window: each side's border fattens by half of it)
         span = int(np.ceil(max(w_[1] - w_[0] for w_ in windows)))
-        gap = other_wall_gap(camera, fit, world_map, edge, config.search_sigma)
+        gap = _other_wall_gap(camera, fit, world_map, edge, float(u_inner[0]), frame, window_l, d_edge)
         bridge = span if not np.isfinite(gap) else max(int(w_sad // 2), min(span, int(gap - w_sad)))
-    b = search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px,
-                        border_sigma_px, bridge)
+    b = _search_boundary(camera, fit, edge, disparity_right, members_u, config, plane_config, window_px,
+                         border_sigma_px, bridge, u_inner)
     return (False if b is None else b), []
 
 
@@ -2075,25 +2104,50 @@ def other_wall_gap(camera: StereoCamera, fit: PlaneFit, world_map: Map, edge: st
     wide seen at 3.7 m with a heading σ of 4.6°: the wall beyond the door predicted 26 px outside the window,
     found 30 px inside it, and the region bridged across the door to its far side). The gap itself is nearly
     free of that error (both ends move together)."""
+    return _other_wall_gap(camera, fit, world_map, edge, float(_inner_columns(camera, fit.X, fit.plane, edge)[0]),
+                           camera._frame(fit.X), fit.prediction.edges[edge].window(0, search_sigma))
+
+
+def _other_wall_gap(camera: StereoCamera, fit: PlaneFit, world_map: Map, edge: str, u_i: float, frame, window,
+                    d_edge=None) -> float:
+    """:func:`other_wall_gap` with the edge's inner left column ``u_i`` (:func:`_inner_columns`), the camera's
+    ``frame`` (:meth:`~stablemarks.geometry.StereoCamera._frame` of ``fit.X``), the edge's left search ``window``
+    and, when known, the prediction's ``(d, σ_d)`` at the edge's left column. The scanned columns are
+    ``np.linspace``'s, made inside the scan (:func:`_wall_gap_scan`)."""
     e = fit.prediction.edges[edge]
     u_e = float(e.u[0])
-    u_i = float(_inner_columns(camera, fit.X, fit.plane, edge)[0])
-    if not np.isfinite(u_e + u_i):
+    if not math.isfinite(u_e + u_i):
         return 0.0
-    lo, hi = e.window(0, search_sigma)
+    lo, hi = window
     outer = lo if u_e < u_i else hi
     outer = u_e + 2.0 * (outer - u_e)
-    cols = np.linspace(u_e, outer, max(2, int(abs(outer - u_e)) + 1))
+    num = max(2, int(abs(outer - u_e)) + 1)
     walls, exclude, kept = world_map.others(fit.plane.id)
     if len(walls) == len(exclude):
         return np.inf
-    cx, cy, psi, c, s = camera._frame(fit.X)
-    d_edge, sigma = fit.prediction.disparity_at(u_e)
-    hit = _first_wall_in_band(cols, float(camera.cu), float(camera.f), c, s, cx, cy, walls, kept,
-                              float(np.cos(psi)), float(np.sin(psi)),
-                              float(camera.f * camera.baseline), float(d_edge),
-                              float(fit.prediction.gate * sigma + 1.0))
-    return float(abs(cols[hit] - u_e)) if hit >= 0 else np.inf
+    cx, cy, psi, c, s = frame
+    d, sigma = fit.prediction.disparity_at(u_e) if d_edge is None else d_edge
+    return float(_wall_gap_scan(u_e, outer, num, float(camera.cu), float(camera.f), c, s, cx, cy, walls, kept,
+                                float(np.cos(psi)), float(np.sin(psi)), float(camera.f * camera.baseline), float(d),
+                                float(fit.prediction.gate * sigma + 1.0)))
+
+
+@njit(cache=True, error_model="numpy")
+def _wall_gap_scan(start, stop, num, cu, f, c, s, cx, cy, walls, kept, fwd0, fwd1, fb, d_edge,
+                   tol):  # pragma: no cover - numba
+    """:func:`other_wall_gap`'s columns ``np.linspace(start, stop, num)`` (``num`` >= 2: ``i · step + start`` with
+    ``step = (stop − start) / (num − 1)``, ``(i / (num − 1)) · (stop − start) + start`` when that step is 0, the last
+    one ``stop``: NumPy's operations) scanned by :func:`_first_wall_in_band`: ``|column − start|`` of the first hit,
+    inf when none (the array of columns made here, not by a NumPy call per edge)."""
+    cols = np.empty(num)
+    div = num - 1
+    delta = stop - start
+    step = delta / div
+    for i in range(num):
+        cols[i] = (float(i) / div) * delta + start if step == 0 else float(i) * step + start
+    cols[num - 1] = stop
+    hit = _first_wall_in_band(cols, cu, f, c, s, cx, cy, walls, kept, fwd0, fwd1, fb, d_edge, tol)
+    return abs(cols[hit] - start) if hit >= 0 else np.inf
 
 
 @njit(cache=True, error_model="numpy")
@@ -2144,23 +2198,30 @@ def edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, o
     """Disparity [px] the map predicts ``offset_px`` columns beyond a wall's edge in the left image, minus
     the wall's own disparity at the edge (from pose ``X``). Positive: something nearer than the wall lies
     beyond the edge; the wall's negated disparity when no wall of the map is hit (open space)."""
-    P = plane.edge(edge)
-    u_e = float(camera.project_columns(X, P)[0])
-    u_i = float(_inner_columns(camera, X, plane, edge)[0])
-    if not np.isfinite(u_e + u_i):
+    return _edge_depth_step(camera, X, world_map, plane, edge, offset_px,
+                            float(_inner_columns(camera, X, plane, edge)[0]), camera._frame(X))
+
+
+def _edge_depth_step(camera: StereoCamera, X, world_map: Map, plane, edge: str, offset_px: float, u_i: float,
+                     frame) -> float:
+    """:func:`edge_depth_step` with the edge's inner left column ``u_i`` (:func:`_inner_columns`) and the camera's
+    ``frame`` (:meth:`~stablemarks.geometry.StereoCamera._frame` of ``X``) already known."""
+    cx, cy, psi, c, s = frame
+    px, py = plane.edge(edge).tolist()
+    u_e = float(camera._project_point(px - cx, py - cy, c, s)[0])  # project_columns of the one point
+    if not math.isfinite(u_e + u_i):
         return 0.0
-    u_out = u_e + float(np.sign(u_e - u_i)) * offset_px
+    u_out = u_e + (1.0 if u_e > u_i else -1.0 if u_e < u_i else 0.0) * offset_px  # np.sign of a finite difference
     fb = camera.f * camera.baseline
     # to_camera and column_ray of one point / one column on Python floats: the same operations (the ray's norm the
     # square root of its two squares summed, as np.linalg.norm along an axis)
-    cx, cy, _, c, s = camera._frame(X)
-    Z_e = c * (float(P[0]) - cx) + s * (float(P[1]) - cy)
+    Z_e = c * (px - cx) + s * (py - cy)
     xn = (u_out - camera.cu) / camera.f
     r0, r1 = c + s * xn, s - c * xn
     norm = math.sqrt(r0 * r0 + r1 * r1)
-    ray = np.array([r0 / norm, r1 / norm])
+    ray0, ray1 = r0 / norm, r1 / norm
     walls, _, kept = world_map.others(plane.id)
-    dist = nearest_crossing(cx, cy, float(ray[0]), float(ray[1]), walls, kept)  # ray_distances of the one ray
-    cam = camera.camera_pose(X)
-    Z_bg = dist * (ray @ np.array([np.cos(cam.theta), np.sin(cam.theta)]))
+    dist = nearest_crossing(cx, cy, ray0, ray1, walls, kept)  # ray_distances of the one ray
+    # the depth along the optical axis as NumPy's dot product of the two pairs (the camera's heading is psi)
+    Z_bg = dist * (np.array([ray0, ray1]) @ np.array([np.cos(psi), np.sin(psi)]))
     return float((fb / Z_bg if np.isfinite(Z_bg) and Z_bg > 0 else 0.0) - fb / Z_e)

@@ -1287,7 +1287,7 @@ def landmarks_on_plane(
                                                               window_px, box=box)])
             memo[("edge", edge)] = _edge_search(camera, fit, edge, disparity_right, lines, config, plane_config,
                                                 window_px, valid_columns, world_map, border_sigma_px,
-                                                disparity_range, w_sad)
+                                                disparity_range, w_sad, memo.setdefault("inner", {}))
         found, rejected_before = memo[("edge", edge)]  # None: not searched; False: searched, not found
         rejected += rejected_before
         if found is None:
@@ -1300,7 +1300,8 @@ def landmarks_on_plane(
             rejected.append((b, unusable[edge]))
             continue
         if ("checked", edge) not in memo:
-            memo[("checked", edge)] = _boundary_checks(camera, fit, b, config, window_px, cov_X, disparity_left)
+            memo[("checked", edge)] = _boundary_checks(camera, fit, b, config, window_px, cov_X, disparity_left,
+                                                       memo.setdefault("inner", {}))
         why, occluded = memo[("checked", edge)]
         if why:
             rejected.append((b, why))
@@ -1504,10 +1505,11 @@ def _edge_lines_kept(disp, ul, d, v_top, v_bottom, below, outward, half, window,
 
 def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right, members_u, config: LandmarkConfig,
                  plane_config: PlaneConfig, window_px: float, valid_columns, world_map: Map | None, border_sigma_px,
-                 disparity_range, w_sad: float) -> tuple[Boundary | bool | None, list]:
+                 disparity_range, w_sad: float, inner: dict | None = None) -> tuple[Boundary | bool | None, list]:
     """:func:`landmarks_on_plane`'s search of one free edge: whether it is searched and what is found, ``(found,
     rejected)``: ``found`` None when the edge is not searched, False when searched and not found, else the
-    :func:`search_boundary` boundary; ``rejected`` the reasons (with no boundary) it was not searched for."""
+    :func:`search_boundary` boundary; ``rejected`` the reasons (with no boundary) it was not searched for.
+    ``inner``: a dict of the edges' :func:`_inner_columns` (by edge) to take them from and add them to."""
     e = fit.prediction.edges[edge]
     u_l, u_r = e.u.tolist()
     if not (math.isfinite(u_l) and math.isfinite(u_r)):  # the edge is behind the camera
@@ -1542,7 +1544,10 @@ def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right
         if edge_occluded(camera, fit.X, world_map, fit.plane, edge):
             return None, []
     # what the depth step, the gap and the search each computed of the edge: its inner columns and the camera's frame
-    u_inner = _inner_columns(camera, fit.X, fit.plane, edge)
+    inner = {} if inner is None else inner
+    if edge not in inner:
+        inner[edge] = _inner_columns(camera, fit.X, fit.plane, edge)
+    u_inner = inner[edge]
     frame = camera._frame(fit.X)
     if world_map is not None:
         step = _edge_depth_step(camera, fit.X, world_map, fit.plane, edge, window_px / 2 + 1, float(u_inner[0]),
@@ -1562,13 +1567,16 @@ def _edge_search(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_right
 
 
 def _boundary_checks(camera: StereoCamera, fit: PlaneFit, b: Boundary, config: LandmarkConfig, window_px: float,
-                     cov_X, disparity_left) -> tuple[str, bool]:
+                     cov_X, disparity_left, inner: dict | None = None) -> tuple[str, bool]:
     """Why :func:`landmarks_on_plane` does not use the boundary ``b`` it found ("" when it does), and whether that
     is because it is the silhouette of something nearer (the wall's end hidden) rather than too far from the map's
-    edge for the pose."""
+    edge for the pose. ``inner``: as :func:`_edge_search`'s."""
     edge = b.edge
+    inner = {} if inner is None else inner
+    if disparity_left is not None and config.nearer_fraction < 1.0 and edge not in inner:
+        inner[edge] = _inner_columns(camera, fit.X, fit.plane, edge)
     if disparity_left is not None and config.nearer_fraction < 1.0 and \
-            occluded_boundary(camera, fit, disparity_left, b, window_px, config.nearer_fraction):
+            _occluded_boundary(fit, disparity_left, b, window_px, config.nearer_fraction, float(inner[edge][0])):
         return (f"plane {fit.plane.label!r}: the boundary found at {edge} is the silhouette of "
                 "something nearer standing in front of the wall, not its end: not used"), True
     if cov_X is not None:
@@ -1678,14 +1686,19 @@ def occluded_boundary(camera: StereoCamera, fit: PlaneFit, disparity_left: np.nd
     it (the map's depth step, :func:`edge_depth_step`); a nearer surface there hides the end, and the planar
     region stops at the occluder's side (the office: a pole 0.8 m in front of the white board's end, whose
     region ended 16–34 px inside the hidden edge, 6–16 cm along the wall)."""
+    return _occluded_boundary(fit, disparity_left, b, window_px, fraction,
+                              float(_inner_columns(camera, fit.X, fit.plane, b.edge)[0]))
+
+
+def _occluded_boundary(fit: PlaneFit, disparity_left: np.ndarray, b: Boundary, window_px: float, fraction: float,
+                       inner: float) -> bool:
+    """:func:`occluded_boundary` with the left column ``inner`` of the edge's :func:`_inner_columns` known."""
     pred = fit.prediction
     u = float(b.u[0])
-    inner = float(_inner_columns(camera, fit.X, fit.plane, b.edge)[0])
     outward = -1 if u < inner else 1
-    v_top = float(np.interp(u, pred.columns, pred.v_top))
-    v_bottom = float(np.interp(u, pred.columns, pred.v_bottom))
-    return int(beside_nearer_sides(fit, disparity_left, [u], [v_top], [v_bottom], [0.0], window_px, fraction,
-                                   (outward,))[0]) == outward
+    v_top, v_bottom = pred.interp_two(u, "v_top", "v_bottom")  # np.interp's values at u
+    return int(beside_nearer_sides(fit, disparity_left, [u], [float(v_top)], [float(v_bottom)], [0.0], window_px,
+                                   fraction, (outward,))[0]) == outward
 
 
 def beside_nearer_sides(fit: PlaneFit, disparity_left: np.ndarray, u_left, v_top, v_bottom, slope,
@@ -1701,7 +1714,7 @@ def beside_nearer_sides(fit: PlaneFit, disparity_left: np.ndarray, u_left, v_top
         disparity_left, rows_box.start, rows_box.stop, cols_box.start, cols_box.stop,
         np.asarray(u_left, dtype=np.float64), np.asarray(v_top, dtype=np.float64),
         np.asarray(v_bottom, dtype=np.float64), np.asarray(slope, dtype=np.float64),
-        int(window_px // 2) + 1, int(window_px) + 2, np.asarray(pred.columns, dtype=np.float64),
+        int(window_px // 2) + 1, int(window_px) + 2, pred._columns_float,
         np.asarray(pred.d, dtype=np.float64), np.asarray(pred.sigma_d, dtype=np.float64), float(pred.gate),
         float(fraction), np.asarray(sides, dtype=np.int64))
 

@@ -163,8 +163,41 @@ class PlanePrediction:
 
     def disparity_at(self, u) -> tuple[np.ndarray, np.ndarray]:
         """Predicted disparity and σ_d at (sub-pixel) left columns ``u`` (linear interpolation)."""
+        if type(u) is float or type(u) is np.float64:  # one column (the landmark stage asks for a few a frame)
+            return self.interp_two(u, "d", "sigma_d")
         u = np.asarray(u, dtype=float)
         return np.interp(u, self.columns, self.d), np.interp(u, self.columns, self.sigma_d)
+
+    def interp_two(self, u: float, first: str, second: str) -> tuple[np.float64, np.float64]:
+        """``(np.interp(u, columns, self.<first>), np.interp(u, columns, self.<second>))`` at one column ``u`` (a
+        Python or NumPy float) of two of the per-column arrays (``"d"``, ``"sigma_d"``, ``"v_top"``, ``"v_bottom"``):
+        np.interp's operations in one numba call (:func:`_interp_two`), its float64 scalars; np.interp itself for
+        arrays that are not 1-D float64 of the columns' length."""
+        tables = self._interp_tables
+        if first in tables and second in tables:
+            x, y = _interp_two(float(u), self._columns_float, tables[first], tables[second])
+            return np.float64(x), np.float64(y)
+        return (np.interp(np.float64(u), self.columns, getattr(self, first)),
+                np.interp(np.float64(u), self.columns, getattr(self, second)))
+
+    @cached_property
+    def _columns_float(self) -> np.ndarray:
+        """:attr:`columns` as float64 (as np.interp takes them), made once per prediction."""
+        return np.ascontiguousarray(self.columns, dtype=np.float64)
+
+    @cached_property
+    def _interp_tables(self) -> dict[str, np.ndarray]:
+        """The per-column arrays that are contiguous 1-D float64 of the columns' length (those :meth:`interp_two`
+        hands to :func:`_interp_two`), by name; made once per prediction."""
+        K = np.shape(self.columns)
+        if len(K) != 1 or K[0] < 1:
+            return {}
+        out = {}
+        for name in ("d", "sigma_d", "v_top", "v_bottom"):
+            a = np.asarray(getattr(self, name))
+            if a.dtype == np.float64 and a.shape == K:
+                out[name] = np.ascontiguousarray(a)
+        return out
 
     def band(self, disparity: np.ndarray, row_margin: float = 0.0) -> np.ndarray:
         """Pixels (H, W) of a left-reference disparity image inside the plane's 3σ band (Sec 2.3.4)."""
@@ -196,6 +229,45 @@ class PlanePrediction:
         """The highest row of the wall's top and the lowest of its bottom over the window: ``(v_top.min(),
         v_bottom.max())`` (made once per prediction: :meth:`box` is asked for by the fit and the regions)."""
         return float(self.v_top.min()), float(self.v_bottom.max())
+
+
+@njit(cache=True)
+def _interp_two(x, xp, fp1, fp2):  # pragma: no cover - numba
+    """``(np.interp(x, xp, fp1), np.interp(x, xp, fp2))`` of one number ``x`` (``xp`` increasing, float64, at least one
+    element): NumPy's C loop's operations — for one element its value whatever ``x``, else NaN for NaN, the end values
+    outside ``xp`` (and at its last element), at a node its value, else the slope ``(fp[j+1] − fp[j]) / (xp[j+1] −
+    xp[j])`` times ``x − xp[j]`` plus ``fp[j]``, with its fallbacks where that is NaN — the node ``j`` found once for
+    both."""
+    n = xp.shape[0]
+    if n == 1:  # whatever x (NaN too): the one value
+        return fp1[0], fp2[0]
+    if np.isnan(x):
+        return x, x
+    if x < xp[0]:
+        return fp1[0], fp2[0]
+    if x > xp[n - 1] or x == xp[n - 1]:
+        return fp1[n - 1], fp2[n - 1]
+    lo, hi = 0, n - 1  # xp[lo] <= x < xp[hi]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    j = lo
+    if xp[j] == x:
+        return fp1[j], fp2[j]
+    out = np.empty(2)
+    for q in range(2):
+        fp = fp1 if q == 0 else fp2
+        slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+        y = slope * (x - xp[j]) + fp[j]
+        if np.isnan(y):
+            y = slope * (x - xp[j + 1]) + fp[j + 1]
+            if np.isnan(y) and fp[j] == fp[j + 1]:
+                y = fp[j]
+        out[q] = y
+    return out[0], out[1]
 
 
 def column_depth_on_wall(camera: StereoCamera, X, plane: ReferencePlane, u, *, jacobian: bool = False):
@@ -514,12 +586,14 @@ def fit_plane(
     # Every pixel of the band's box in the wall frame, placed with the mean pose: the left pixel at column
     # u with depth Z is at c + Z r(u), r(u) = fwd + (u − cu)/f · right the world direction of unit depth.
     X = np.asarray(X, dtype=float)
-    cam = camera.camera_pose(X)
-    fwd = np.array([np.cos(cam.theta), np.sin(cam.theta)])
-    right = np.array([np.sin(cam.theta), -np.cos(cam.theta)])
+    cx, cy, psi, _, _ = camera._frame(X)  # the camera's pose (camera_pose's numbers, without the SE2)
+    cos_p, sin_p = np.cos(psi), np.sin(psi)
+    fwd = np.array([cos_p, sin_p])
+    right = np.array([sin_p, -cos_p])
     r = fwd + ((prediction.columns - camera.cu) / camera.f)[:, None] * right  # (K, 2)
     r_s, r_o = r @ plane.direction, r @ plane.normal
-    c_s, c_o = float(plane.along(cam.translation)), float(plane.offset(cam.translation))
+    centre = np.array([cx, cy])
+    c_s, c_o = float(plane.along(centre)), float(plane.offset(centre))
     fb = camera.f * camera.baseline
     # Fit on every other row and column (neighbouring pixels share their SAD window anyway), then
     # classify every band pixel with the final line.
@@ -568,8 +642,7 @@ def fit_plane(
         cov_R = _at_least(cov_R, _sandwich(N_inv, scores))
     # a disparity error β shared by the wall moves each pixel along its ray: ∂(s, o)/∂β = −Z/(f b) (s − c_s,
     # o − c_o), Z the pixel's depth; the line (a, b) follows through the weighted least squares
-    depth = (s_in - c_s) * (fwd @ plane.direction) + (o_in - c_o) * (fwd @ plane.normal)
-    g = -(depth / fb) * ((o_in - c_o) - b * (s_in - c_s))
+    g = _bias_rates(s_in, o_in, c_s, c_o, float(fwd @ plane.direction), float(fwd @ plane.normal), fb, b)
     J_beta = N_inv @ np.array([wgt @ g, w_ds @ g])
     if config.disparity_bias_px > 0 or config.disparity_tilt_px > 0:
         if config.disparity_bias_px > 0:
@@ -585,6 +658,20 @@ def fit_plane(
     region = np.zeros(np.shape(disparity), dtype=bool)
     n_keep = _on_line_region(region, rows.start, cols.start, disp, band, *frame, a, b, s0, config.outlier_sigma * scale)
     return PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, n_keep, chi2_dof, X, (rows, cols), J_beta)
+
+
+@njit(cache=True)
+def _bias_rates(s_in, o_in, c_s, c_o, fwd_s, fwd_o, fb, b):  # pragma: no cover - numba
+    """:func:`fit_plane`'s ``g = −(depth / fb) · ((o − c_o) − b (s − c_s))`` of the inliers, ``depth = (s − c_s) fwd_s +
+    (o − c_o) fwd_o``: the array expressions' element-wise operations in one pass, without their temporaries."""
+    n = s_in.shape[0]
+    g = np.empty(n)
+    for i in range(n):
+        ds = s_in[i] - c_s
+        do = o_in[i] - c_o
+        depth = ds * fwd_s + do * fwd_o
+        g[i] = -(depth / fb) * (do - b * ds)
+    return g
 
 
 @njit(cache=True)

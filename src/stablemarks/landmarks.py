@@ -412,6 +412,23 @@ def minimum_variance_column(cols: np.ndarray, lo: float, hi: float) -> tuple[flo
 
 
 @njit(cache=True)
+def _left_end_column(block, v0, u0, c0, c1, outward, max_hole, k, lo, hi):  # pragma: no cover - numba
+    """:func:`search_boundary`'s left image: :func:`_block_row_ends` of the window's columns ``c0 … c1``, then
+    :func:`_robust_minimum_variance` of the rows' columns (``k``, ``lo``, ``hi``), in one call."""
+    _, cols = _block_row_ends(block, v0, u0, c0, c1, outward, max_hole)
+    return _robust_minimum_variance(cols, k, lo, hi)
+
+
+@njit(cache=True)
+def _right_end_column(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole, k, lo,
+                      hi):  # pragma: no cover - numba
+    """:func:`search_boundary`'s right image: :func:`_right_row_ends` of the window's columns ``w0 … w1``, then
+    :func:`_robust_minimum_variance` of the rows' columns (``k``, ``lo``, ``hi``), in one call."""
+    _, cols = _right_row_ends(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole)
+    return _robust_minimum_variance(cols, k, lo, hi)
+
+
+@njit(cache=True)
 def _sorted_median(x):  # pragma: no cover - numba
     """:func:`~stablemarks.planes.median` of a 1-D array (at least one number) by sorting a copy: the same element, or
     the same two averaged."""
@@ -493,8 +510,9 @@ def _right_box(prediction, disparity_right: np.ndarray, row_margin: float = 0.0,
     c0, c1 = (0, W - 1) if columns is None else (max(0, int(columns[0])), min(W - 1, int(columns[1])))
     if c1 < c0:
         return disparity_right[:0, :0], 0, 0
-    v0 = max(0, int(np.floor(prediction.v_top.min() - row_margin)))
-    v1 = min(H - 1, int(np.ceil(prediction.v_bottom.max() + row_margin)))
+    top, bottom = prediction.rows_reached  # v_top.min(), v_bottom.max(), made once per prediction
+    v0 = max(0, math.floor(top - row_margin))
+    v1 = min(H - 1, math.ceil(bottom + row_margin))
     if v1 < v0:
         return disparity_right[:0, :0], 0, 0
     return disparity_right[v0 : v1 + 1, c0 : c1 + 1], v0, c0
@@ -673,31 +691,43 @@ def _search_boundary(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_r
     H, W = fit.region.shape
     v0, v1, _ = fit.box[0].indices(H)
     regions = [(fit.region[v0:max(v0, v1)], v0, 0), None]
-    if disparity_right is not None and np.isfinite(e.u).all():
-        lo_r, hi_r = e.window(1, config.search_sigma)
+    e_u = e.u.tolist()
+    windows = [e.window(0, config.search_sigma), e.window(1, config.search_sigma)]
+    if disparity_right is not None and math.isfinite(e_u[0]) and math.isfinite(e_u[1]):
+        lo_r, hi_r = windows[1]
         # the right region's block is not made: its pixels are tested as the row walk reads them
         # (_right_row_ends; _right_block's box and edge cases)
         regions[1] = _right_box(pred, disparity_right, plane_config.row_margin_px,
-                                (int(np.floor(lo_r)) - 1, int(np.ceil(hi_r)) + 1))
-    outwards = [-1 if e.u[img] < u_inner[img] else 1 for img in (0, 1)]
+                                (math.floor(lo_r) - 1, math.ceil(hi_r) + 1))
+    u_in = u_inner.tolist()
+    outwards = [-1 if e_u[img] < u_in[img] else 1 for img in (0, 1)]
     right_found = True
+    k_mad = float(config.row_outlier_mad)
     for img in (0, 1):
         outward = outwards[img]
-        lo, hi = e.window(img, config.search_sigma)
+        lo, hi = windows[img]
         if img == 0:  # the left region exists only inside the plane's predicted window
-            lo, hi = max(lo, pred.window[0]), min(hi, pred.window[1])
+            p_lo, p_hi = pred.window
+            lo, hi = max(lo, p_lo), min(hi, p_hi)
         if regions[img] is None:
             n_rows = 0
         else:
             block, bv0, bu0 = regions[img]
             hole = int(w // 2) if bridge_px is None else int(bridge_px)
-            if img == 0:
-                _, cols = _block_boundary_columns(block, bv0, bu0, W, lo, hi, outward, hole)
+            # each image's boundary columns (_block_boundary_columns, _right_boundary_columns), then robust_rows and
+            # minimum_variance_column of the rows kept (_robust_minimum_variance), in one numba call
+            Wi = W if img == 0 else disparity_right.shape[1]
+            c0 = math.floor(min(max(lo, 0), Wi - 1))
+            c1 = math.ceil(min(max(hi, 0), Wi - 1))
+            if c1 < c0:
+                n_rows, m, var = 0, np.nan, np.nan  # no column: no row (what _robust_minimum_variance gives of none)
+            elif img == 0:
+                n_rows, m, var = _left_end_column(np.ascontiguousarray(block, dtype=np.bool_), int(bv0), int(bu0), c0,
+                                                  c1, int(outward), int(hole), k_mad, float(lo), float(hi))
             else:
-                _, cols = _right_boundary_columns(pred, block, bv0, bu0, disparity_right.shape[1], lo, hi, outward,
-                                                  hole, plane_config.row_margin_px)
-            # robust_rows, then minimum_variance_column of the rows kept, in one numba call
-            n_rows, m, var = _robust_minimum_variance(cols, float(config.row_outlier_mad), float(lo), float(hi))
+                n_rows, m, var = _right_end_column(block, int(bu0), int(bv0), int(pred.columns[0]), pred.band_table,
+                                                   float(pred.gate), float(plane_config.row_margin_px), c0, c1,
+                                                   int(outward), int(hole), k_mad, float(lo), float(hi))
         if n_rows < config.min_boundary_rows:
             if img == 0:
                 return None

@@ -831,21 +831,20 @@ def model_features(
     P_hat, cov_hat = fit.fuse_point(P_f, cov_f)
     d_p = (P_hat - boundary.P) @ t
     sigma_f = np.sqrt(np.einsum("i,kij,j->k", t, cov_hat, t))
-    var_s = boundary.sigma_along**2 + sigma_f**2
-    tt = np.outer(t, t)
-    Xc, Zc = camera.to_camera(X, P_hat)
-    z_high = camera.heights(pairs.v_top[k], Zc)
-    z_low = camera.heights(pairs.v_bottom[k], Zc)
-    # heights: z = h − (v − c_v) Z / f; σ_z² = (Z σ_v / f)² + ((h − z) σ_Z / Z)²
-    centre = camera.optical_centres(X)[0]
-    ray = P_hat - centre
-    dist = np.hypot(ray[:, 0], ray[:, 1])
-    view = ray / dist[:, None]
+    # heights: z = h − (v − c_v) Z / f; σ_z² = (Z σ_v / f)² + ((h − z) σ_Z / Z)². The element-wise parts (to_camera's
+    # depth, heights, the ray from the left optical centre, its length and direction; then the heights' margin, var_s,
+    # Eqs 15 and 17) in two numba passes (_feature_geometry, _feature_margins): the array expressions' operations,
+    # without their two dozen small NumPy calls; the einsums and the products with a vector stay NumPy's
+    cx, cy, _, c, s = camera._frame(X)
+    h = float(camera.mount_height)
+    Zc, z_high, z_low, dist, view = _feature_geometry(
+        P_hat, cx, cy, c, s, np.asarray(pairs.v_top[k], dtype=float), np.asarray(pairs.v_bottom[k], dtype=float),
+        float(camera.cv), float(camera.f), h)
     var_Z = np.einsum("ki,kij,kj->k", view, cov_hat, view)
-    sigma_row_z = Zc * config.row_sigma_px / camera.f
-    h = camera.mount_height
-    span = np.maximum(np.abs(h - z_low), np.abs(h - z_high))
-    margin = config.off_wall_sigma * np.sqrt(sigma_row_z**2 + (span / Zc) ** 2 * var_Z)
+    margin, var_s, P_model, cov_model = _feature_margins(
+        Zc, z_high, z_low, var_Z, sigma_f, d_p, h, float(config.row_sigma_px), float(camera.f),
+        float(config.off_wall_sigma), float(boundary.sigma_along**2), np.asarray(P_edge, dtype=float),
+        np.asarray(t, dtype=float))
     incidence = np.arccos(np.clip(np.abs(view @ plane.normal), 0.0, 1.0))
     J_shared, sigma_own, cov_shared = relative_error_model(camera, fit, boundary, pairs.u_left[k], pairs.u_right[k],
                                                            t, config.filter_boundary_sigma == "measured")
@@ -859,8 +858,6 @@ def model_features(
     c_l = [np.inf] * len(k) if contrast is None else np.asarray(contrast, dtype=float)[k].tolist()
     so_l = [np.nan] * len(k) if J_shared is None else sigma_own.tolist()
     k_l = k.tolist()
-    P_model = P_edge + d_p[:, None] * t  # Eq 15, every candidate's (row j: P_edge + d_p[j] t)
-    cov_model = var_s[:, None, None] * tt  # Eq 17: rank 1 along the wall
     # the rows of the per-candidate arrays as lists of views (what ``a[j]`` gives), and each candidate made as
     # _new_candidate makes it from a dict literal (a literal is built faster than ``dict(**kw)``; its keys, the same
     # for every candidate, are checked once): ~1.5 µs a candidate instead of ~3
@@ -887,6 +884,62 @@ def model_features(
         c.__dict__.update(values)
         out.append(c)
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _feature_geometry(P_hat, cx, cy, c, s, v_top, v_bottom, cv, f, h):  # pragma: no cover - numba
+    """:func:`model_features`' points ``P_hat`` (n, 2) seen from the left optical centre ``(cx, cy)`` (heading ``(c,
+    s)``): the depth ``Z_c`` (:meth:`~stablemarks.geometry.StereoCamera.to_camera`), the heights of the rows
+    ``v_top``, ``v_bottom`` there (:meth:`~stablemarks.geometry.StereoCamera.heights`), the distance ``hypot`` of
+    the ray and its direction — each the array expression's operations on one point."""
+    n = P_hat.shape[0]
+    Zc = np.empty(n)
+    z_high = np.empty(n)
+    z_low = np.empty(n)
+    dist = np.empty(n)
+    view = np.empty((n, 2))
+    for i in range(n):
+        dx = P_hat[i, 0] - cx
+        dy = P_hat[i, 1] - cy
+        z = c * dx + s * dy
+        Zc[i] = z
+        z_high[i] = h - (v_top[i] - cv) * z / f
+        z_low[i] = h - (v_bottom[i] - cv) * z / f
+        d = np.hypot(dx, dy)
+        dist[i] = d
+        view[i, 0] = dx / d
+        view[i, 1] = dy / d
+    return Zc, z_high, z_low, dist, view
+
+
+@njit(cache=True, error_model="numpy")
+def _feature_margins(Zc, z_high, z_low, var_Z, sigma_f, d_p, h, row_sigma_px, f, off_wall_sigma, var_b, P_edge,
+                     t):  # pragma: no cover - numba
+    """:func:`model_features`' height margins ``k σ`` (``k = off_wall_sigma``, ``σ² = (Z σ_v / f)² + (span / Z)²
+    σ_Z²``), ``var_s = σ_b² + σ_f²`` and each candidate's Eq 15 point ``P_edge + d_p t`` and Eq 17 covariance ``var_s
+    t tᵀ``: the array expressions' operations per candidate (``np.maximum``'s NaN, squares as products)."""
+    n = Zc.shape[0]
+    margin = np.empty(n)
+    var_s = np.empty(n)
+    P_model = np.empty((n, 2))
+    cov_model = np.empty((n, 2, 2))
+    t00, t01, t11 = t[0] * t[0], t[0] * t[1], t[1] * t[1]
+    t10 = t[1] * t[0]
+    for i in range(n):
+        z = Zc[i]
+        srz = z * row_sigma_px / f
+        span = np.maximum(abs(h - z_low[i]), abs(h - z_high[i]))
+        q = span / z
+        margin[i] = off_wall_sigma * np.sqrt(srz * srz + q * q * var_Z[i])
+        v = var_b + sigma_f[i] * sigma_f[i]
+        var_s[i] = v
+        P_model[i, 0] = P_edge[0] + d_p[i] * t[0]
+        P_model[i, 1] = P_edge[1] + d_p[i] * t[1]
+        cov_model[i, 0, 0] = v * t00
+        cov_model[i, 0, 1] = v * t01
+        cov_model[i, 1, 0] = v * t10
+        cov_model[i, 1, 1] = v * t11
+    return margin, var_s, P_model, cov_model
 
 
 def _new_candidate(values: dict) -> Candidate:

@@ -682,8 +682,10 @@ def _search_boundary(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_r
     plane = fit.plane
     e = pred.edges[edge]
     X = fit.X
-    u_b = np.zeros(2)
-    var_b = np.zeros(2)
+    # the boundary's columns and their variances, as Python floats until the Boundary is made (the same doubles as
+    # in the float64 arrays they were kept in; unset: 0.0)
+    u_b = [0.0, 0.0]
+    var_b = [0.0, 0.0]
     rows_used = 0
     snapped = False
     # each image's region as a block (rows v0 …, columns u0 …) of an image W wide, empty outside it: the left
@@ -735,8 +737,8 @@ def _search_boundary(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_r
             continue
         if img == 0:
             rows_used = n_rows
-        u_b[img] = m
-        var_b[img] = var + camera.sigma_img**2
+        u_b[img] = float(m)
+        var_b[img] = float(var + camera.sigma_img**2)
     # A boundary placed inside the outermost segment of the region is moved to that segment. Block matching
     # erodes or fattens a region's border by up to the window, so only segments within one window beyond it
     # count (farther ones lie on a wall in line with this one, past a gap). The move takes one segment *pair*
@@ -745,19 +747,20 @@ def _search_boundary(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_r
     # 0.1 m along it). The pair's right line must lie within one window of the right border too.
     if len(members_u):
         # the member pair farthest beyond the left border within one window (first of equals; on Python floats)
-        (ub0, ub1), (o0, o1) = u_b.tolist(), outwards
+        (ub0, ub1), (o0, o1) = u_b, outwards
         k, farthest = -1, 0.0
-        for q, (m0, m1) in enumerate(members_u.tolist()):
+        members = members_u.tolist()
+        for q, (m0, m1) in enumerate(members):
             b0 = (m0 - ub0) * o0
             if 0 < b0 <= w and (not right_found or abs((m1 - ub1) * o1) <= w) and (k < 0 or b0 > farthest):
                 k, farthest = q, b0
         if k >= 0:
-            u_b[:] = members_u[k]
+            u_b = [float(v) for v in members[k]]
             snapped = True
             # the edge is now that segment pair's lines, each good to the line noise: the spread of the
             # region's border rows it replaced no longer applies (what may lie between line and edge is
             # the shared ``border`` term below)
-            var_b[:] = camera.sigma_img**2
+            var_b = [float(camera.sigma_img**2)] * 2
             right_found = True
     if right_found and not snapped:
         # The two borders were found apart. Block matching moves a depth edge in 3-D (both images the same way),
@@ -771,26 +774,28 @@ def _search_boundary(camera: StereoCamera, fit: PlaneFit, edge: str, disparity_r
         # right image unusable: take the column where the fitted plane puts the left boundary
         d_here, _ = pred.disparity_at(u_b[0])
         u_b[1] = u_b[0] - float(d_here)
-        var_b[1] = config.fallback_sigma_px**2
+        var_b[1] = float(config.fallback_sigma_px**2)
     # The window term is one physical effect seen by both disparity images (the window straddling the
     # depth edge shifts the region's border the same way in 3D): it is shared, fully correlated.
     border = border_sigma_px if isinstance(border_sigma_px, tuple) else (border_sigma_px, border_sigma_px)
     border = border[0] if snapped else border[1]
     var_w = w**2 / 12.0 if border is None else float(border) ** 2
-    vb0, vb1 = var_b.tolist()
+    vb0, vb1 = var_b
     cov_uv = np.array([[vb0 + var_w, var_w], [var_w, vb1 + var_w]])  # np.diag(var_b) + var_w
-    sigma_u = np.sqrt(np.array([vb0 + var_w, vb1 + var_w]))
+    sigma_u = np.array([math.sqrt(vb0 + var_w), math.sqrt(vb1 + var_w)])  # IEEE square roots, as np.sqrt's
     # triangulate's branch for one column pair with a full covariance (_triangulate_one), called directly
-    P, cov = camera._triangulate_one(float(u_b[0]), float(u_b[1]), X, cov_uv)
-    if not np.isfinite(P).all():
+    P, cov = camera._triangulate_one(u_b[0], u_b[1], X, cov_uv)
+    p0, p1 = P.tolist()
+    if not (math.isfinite(p0) and math.isfinite(p1)):
         # non-positive disparity from two independent searches: intersect the left ray with the plane
         d_here, _ = pred.disparity_at(u_b[0])
         u_b[1] = u_b[0] - float(d_here)
-        P, cov = camera._triangulate_one(float(u_b[0]), float(u_b[1]), X, cov_uv)
+        P, cov = camera._triangulate_one(u_b[0], u_b[1], X, cov_uv)
     P_hat, cov_hat = fit.fuse_point(P, cov)
     t = _inward(plane, edge)
     sigma_along = float(np.sqrt(t @ cov_hat @ t))
     sigma_m = np.nan
+    u_b = np.array(u_b)
     if config.filter_boundary_sigma == "measured":
         # the same without the window allowance: the rows' spread and the image noise only (DESIGN §4)
         _, cov_m = camera.triangulate(u_b[0], u_b[1], X, cov_uv=np.diag(var_b))

@@ -1101,15 +1101,17 @@ def select(candidates: list[Candidate], boundaries: list[Boundary], config: Land
     against every visible free edge, length similarity (Eq 18), contrast, range and incidence. ``z_range``:
     the wall's mapped bottom and top [m] (default: the candidates' plane's is not checked)."""
     out = []
+    first = {}  # the first boundary of each (plane, edge), as the candidates look them up
+    for b in boundaries:
+        first.setdefault((b.plane_id, b.edge), b)
     for c in candidates:
         reason = on_wall_reason(c, config, z_range)
         # the feature where its relative model puts it (``s`` from the boundary it was modelled from): the
         # distance to the wall's other end is then measured the same way as to this one (a wall's far end placed
         # from the map's length is exactly ``length − s`` away; the triangulated point alone is off along the
         # wall by its depth error at an angle, 3 cm at 6 m and 15°, enough to take a poster's far edge for a
-        # feature once the boundaries are known to a few mm)
-        ref = next((b for b in boundaries if b.plane_id == c.plane_id and b.edge == c.edge), None)
-        P_c = ref.P + c.s * ref.inward if ref is not None else c.P_observed
+        # feature once the boundaries are known to a few mm); made when first needed
+        P_c = None
         for b in boundaries:
             if reason:
                 break
@@ -1118,6 +1120,9 @@ def select(candidates: list[Candidate], boundaries: list[Boundary], config: Land
             if b.edge == c.edge:
                 dist = c.s
             else:  # the wall's other end, found in view or placed from the map: distance inward from it
+                if P_c is None:
+                    ref = first.get((c.plane_id, c.edge))
+                    P_c = ref.P + c.s * ref.inward if ref is not None else c.P_observed
                 dist = float((P_c - b.P) @ b.inward)
             sigma_b = b.sigma_along
             if config.boundary_rule == "combined":
@@ -1247,6 +1252,7 @@ def _replace(c: Candidate, **kw) -> Candidate:
 
 
 _CANDIDATE_FIELDS = frozenset(f.name for f in fields(Candidate))
+_BOUNDARY_FIELDS = frozenset(f.name for f in fields(Boundary))
 
 
 def _inward(plane, edge: str) -> np.ndarray:
@@ -2157,8 +2163,20 @@ def mapped_boundaries(plane, boundaries: list[Boundary], ref: Boundary) -> list[
     boundary too), placed the wall's length from ``ref`` (the map fixes it) with ``ref``'s uncertainty,
     for the near-boundary rule."""
     found = {b.edge for b in boundaries}
-    return [replace(ref, edge=e, P=ref.P + plane.length * ref.inward, inward=-ref.inward)
+    return [_replace_boundary(ref, edge=e, P=ref.P + plane.length * ref.inward, inward=-ref.inward)
             for e in ("p1", "p2") if e not in found]
+
+
+def _replace_boundary(b: Boundary, **kw) -> Boundary:
+    """``dataclasses.replace(b, **kw)`` of a Boundary without its cost (see :func:`_replace`: Boundary has no
+    ``__post_init__`` or init-only fields, so the two are the same object)."""
+    unknown = kw.keys() - _BOUNDARY_FIELDS
+    if unknown:
+        raise TypeError(f"Boundary has no field {sorted(unknown)[0]!r}")
+    new = object.__new__(Boundary)
+    new.__dict__.update(b.__dict__)
+    new.__dict__.update(kw)
+    return new
 
 
 def wall_columns(camera: StereoCamera, fit: PlaneFit, search_sigma: float) -> tuple[float, float]:
@@ -2279,7 +2297,8 @@ def _first_wall_in_band(cols, cu, f, c, s, cx, cy, walls, kept, fwd0, fwd1, fb, 
 def edge_incidence(camera: StereoCamera, X, plane, edge: str) -> float:
     """Angle [rad] between the left camera's viewing ray to the wall's end ``edge`` (from pose ``X``) and the
     wall's normal: 0 seen head-on, π/2 along the wall."""
-    ray = plane.edge(edge) - camera.optical_centres(X)[0]
+    cx, cy, *_ = camera._frame(X)
+    ray = plane.edge(edge) - np.array([cx, cy])  # optical_centres(X)[0]
     norm = float(np.hypot(ray[0], ray[1]))
     if norm == 0.0:
         return math.pi / 2

@@ -589,8 +589,9 @@ def fit_plane(
     cx, cy, psi, _, _ = camera._frame(X)  # the camera's pose (camera_pose's numbers, without the SE2)
     cos_p, sin_p = np.cos(psi), np.sin(psi)
     fwd = np.array([cos_p, sin_p])
-    right = np.array([sin_p, -cos_p])
-    r = fwd + ((prediction.columns - camera.cu) / camera.f)[:, None] * right  # (K, 2)
+    # (K, 2): fwd + (u − cu)/f · right, right = (sin, −cos), the array expression's operations (_column_directions)
+    r = _column_directions(np.asarray(prediction.columns), float(camera.cu), float(camera.f), float(cos_p),
+                           float(sin_p))
     r_s, r_o = r @ plane.direction, r @ plane.normal
     centre = np.array([cx, cy])
     c_s, c_o = float(plane.along(centre)), float(plane.offset(centre))
@@ -606,8 +607,11 @@ def fit_plane(
     s, o, sigma_o, w_all, column = _wall_points_weights(disp, band, i0, k0, step, *frame)
     # Robust start: the median offset, then reweighted least squares with outlier rejection.
     inl = np.ones(len(s), dtype=bool)
-    a, b = median(o), 0.0
-    s0 = median(s)
+    if len(s) and s.dtype == o.dtype == np.float64:  # both medians in one call: median()'s order statistics
+        a, s0 = _two_medians(o, s)
+    else:
+        a, s0 = median(o), median(s)
+    b = 0.0
     scale = 1.0
     min_inliers = max(3, len(s) * config.min_pixels // (2 * n))
     outlier_sigma = float(config.outlier_sigma)
@@ -658,6 +662,32 @@ def fit_plane(
     region = np.zeros(np.shape(disparity), dtype=bool)
     n_keep = _on_line_region(region, rows.start, cols.start, disp, band, *frame, a, b, s0, config.outlier_sigma * scale)
     return PlaneFit(plane, prediction, a, b, s0, cov_R, region, n, n_keep, chi2_dof, X, (rows, cols), J_beta)
+
+
+@njit(cache=True)
+def _column_directions(columns, cu, f, cos_p, sin_p):  # pragma: no cover - numba
+    """:func:`fit_plane`'s world directions of unit depth ``fwd + (u − cu)/f · right`` (K, 2) of the left image's
+    ``columns`` (``fwd = (cos, sin)``, ``right = (sin, −cos)``): the array expression's operations per column."""
+    K = columns.shape[0]
+    r = np.empty((K, 2))
+    for k in range(K):
+        xn = (float(columns[k]) - cu) / f
+        r[k, 0] = cos_p + xn * sin_p
+        r[k, 1] = sin_p + xn * -cos_p
+    return r
+
+
+@njit(cache=True)
+def _two_medians(x, y):  # pragma: no cover - numba
+    """:func:`median` of two 1-D float64 arrays (at least one number each) in one call: the same order statistics
+    (:func:`_kth_and_below`) and the same mean of the middle two, as Python floats."""
+    out = np.empty(2)
+    for q in range(2):
+        a = x if q == 0 else y
+        n = a.shape[0]
+        kth, below = _kth_and_below(a, n // 2)
+        out[q] = kth if n % 2 else (below + kth) / 2
+    return out[0], out[1]
 
 
 @njit(cache=True)

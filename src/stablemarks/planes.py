@@ -1295,16 +1295,35 @@ def plane_members(fit: PlaneFit, pairs, left_segments, config: PlaneConfig = Pla
     disparity at its column within the 3σ gate.
     """
     out = np.zeros(len(pairs), dtype=bool)
-    agree, region, v0, c0 = member_candidates(fit, pairs, config)
+    agree, box = _member_agree(fit, pairs, config)
     if len(agree) == 0:
         return out
-    # every pixel of the agreeing pairs' left segments, segment after segment
+    # every pixel of the agreeing pairs' left segments, segment after segment, tested against the region dilated
+    # in the box (member_candidates' dilation) where it is read: each pixel's window in the undilated region
     seg = np.asarray(pairs.left_index)[agree].astype(np.int64)
     H, W = fit.region.shape
-    frac = _member_fractions(seg, np.asarray(left_segments.pixel_offsets, np.int64), left_segments.pixel_uv,
-                             np.ascontiguousarray(region), c0, v0, H, W)
+    frac = _member_fractions_near(seg, np.asarray(left_segments.pixel_offsets, np.int64), left_segments.pixel_uv,
+                                  np.ascontiguousarray(fit.region), *box, max(0, config.member_dilate_px), H, W)
     out[agree] = frac >= config.member_min_fraction
     return out
+
+
+def _member_agree(fit: PlaneFit, pairs, config: PlaneConfig) -> tuple[np.ndarray, tuple[int, int, int, int]]:
+    """:func:`member_candidates` without the dilation: the agreeing pairs' indices and the box ``(v0, v1, c0, c1)``
+    (half-open) its dilated region covers (empty indices: none agrees)."""
+    if len(pairs) == 0:
+        return np.zeros(0, dtype=np.int64), (0, 0, 0, 0)
+    u0, u1 = fit.prediction.window
+    d_pred, s_pred = fit.prediction.disparity_at(pairs.u_left)
+    inside = (pairs.u_left >= u0 - 0.5) & (pairs.u_left <= u1 + 0.5)
+    agree = np.flatnonzero(inside & (np.abs(pairs.disparity - d_pred) <= fit.prediction.gate * s_pred))
+    if len(agree) == 0:
+        return agree, (0, 0, 0, 0)
+    H, W = fit.region.shape
+    px = max(0, config.member_dilate_px)
+    v0, v1, _ = fit.box[0].indices(H)
+    c0, c1, _ = fit.box[1].indices(W)
+    return agree, (max(0, v0 - px), min(H, v1 + px), max(0, c0 - px), min(W, c1 + px))
 
 
 def member_candidates(fit: PlaneFit, pairs, config: PlaneConfig = PlaneConfig()
@@ -1346,6 +1365,38 @@ def _member_fractions(seg, offsets, pixel_uv, region, c0, v0, H, W):  # pragma: 
             u = min(max(np.int64(pixel_uv[q, 0]), 0), W - 1) - c0
             v = min(max(np.int64(pixel_uv[q, 1]), 0), H - 1) - v0
             if u >= 0 and u < w and v >= 0 and v < h and region[v, u]:
+                n_in += 1.0
+        frac[i] = n_in / float(max(b - a, 1))
+    return frac
+
+
+@njit(cache=True)
+def _member_fractions_near(seg, offsets, pixel_uv, region, v0, v1, c0, c1, px, H, W):  # pragma: no cover - numba
+    """:func:`_member_fractions` of the region (H, W) dilated by a square of half-size ``px`` inside the box rows
+    ``v0 … v1 − 1``, columns ``c0 … c1 − 1`` (:func:`member_candidates`' ``dilate`` of the box: cv2 dilates a box
+    without what lies outside it), without making it: a pixel clipped to the image and inside the box is in the
+    dilated region when a region pixel lies in its window clipped to the box (its own pixel looked at first). The
+    same counts, the same division."""
+    frac = np.zeros(len(seg))
+    for i in range(len(seg)):
+        a, b = offsets[seg[i]], offsets[seg[i] + 1]
+        if b <= a:
+            continue
+        n_in = 0.0
+        for q in range(a, b):
+            u = min(max(np.int64(pixel_uv[q, 0]), 0), W - 1)
+            v = min(max(np.int64(pixel_uv[q, 1]), 0), H - 1)
+            if u < c0 or u >= c1 or v < v0 or v >= v1:
+                continue
+            hit = region[v, u]
+            vv = max(v - px, v0)
+            while not hit and vv < min(v + px + 1, v1):
+                for uu in range(max(u - px, c0), min(u + px + 1, c1)):
+                    if region[vv, uu]:
+                        hit = True
+                        break
+                vv += 1
+            if hit:
                 n_in += 1.0
         frac[i] = n_in / float(max(b - a, 1))
     return frac

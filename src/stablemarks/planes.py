@@ -320,7 +320,7 @@ def predict_plane(
     X = np.asarray(X, dtype=float)
     cov_X = np.asarray(cov_X, dtype=float)
     gate = config.gate_sigma
-    ends = np.stack([plane.P1, plane.P2])
+    ends = np.array([plane.P1, plane.P2])  # np.stack of the two ends
     # Eq 5, known wall ends: StereoCamera.cov_columns from the one projection that gives the columns too
     uv, J_X, _ = camera.project_columns(X, ends, jacobians=True)
     cov_I = J_X @ cov_X @ np.swapaxes(J_X, -1, -2)
@@ -334,8 +334,9 @@ def predict_plane(
         w: EdgePrediction(w, ends[i], uv[i], sig[i], w in plane.free_edges) for i, w in enumerate(("p1", "p2"))
     }
     # Column interval of the plane: the visible part of the wall, widened by the ends' 3σ (Eq 6).
-    _, Zc = camera.to_camera(X, ends)
-    if not any(z > 1e-3 for z in Zc.tolist()):
+    # to_camera's depth of the two ends, on Python floats (the same operations)
+    cx, cy, _, c, s = camera._frame(X)
+    if not any(c * (px - cx) + s * (py - cy) > 1e-3 for px, py in ends.tolist()):
         return None
     W = camera.width
     u_ends, s_ends = uv[:, 0].tolist(), sig[:, 0].tolist()
@@ -372,14 +373,13 @@ def _columns_on_wall(camera: StereoCamera, X: np.ndarray, plane: ReferencePlane,
     ``(columns, d, J_d_X, v_top, v_bottom)``, None when no column is. The same operations as those array
     expressions (the element-wise ones in two numba passes, :func:`_column_rays` and :func:`_wall_depths`; the
     matrix products, which NumPy hands to BLAS, still NumPy's), without their two dozen temporaries."""
-    cam = camera.camera_pose(X)
-    psi = cam.theta
+    cx, cy, psi, _, _ = camera._frame(X)  # camera_pose's numbers, without the SE2
     cos_p, sin_p = float(np.cos(psi)), float(np.sin(psi))
     r, dr_dth = _column_rays(u0, u1, float(camera.cu), float(camera.f), cos_p, sin_p)
     n = plane.normal
     c0 = float(n @ plane.P1)
     nr = r @ n
-    num = float(c0 - n @ cam.translation)
+    num = float(c0 - n @ np.array([cx, cy]))
     th = X[2]
     m = np.array([camera.mount_x, camera.mount_y])
     dc_dth = np.array([[-np.sin(th), -np.cos(th)], [np.cos(th), -np.sin(th)]]) @ m

@@ -1047,3 +1047,41 @@ def test_select_landmarks_is_the_former(scenario_frames, scenario_models, monkey
         assert a.warnings == b.warnings
         n += len(a.candidates)
     assert n > 50
+
+
+def test_right_rows_tested_on_their_disparity_only_walk_the_same():
+    """:func:`~stablemarks.landmarks._right_end_column` (rows inside every column's band rows tested on the disparity
+    only) against :func:`~stablemarks.landmarks._right_row_ends` and the robust column of its rows, on random boxes of
+    disparities around random bands: flat and slanted rows, NaN holes, both directions, narrow and wide holes."""
+    rng = np.random.default_rng(10)
+    n = 0
+    for trial in range(300):
+        K = int(rng.integers(2, 80))
+        u0 = int(rng.integers(0, 200))
+        d = rng.uniform(5, 40) + rng.uniform(-0.2, 0.2) * np.arange(K)
+        sigma_d = np.abs(rng.normal(0.5, 0.3, K)) + 0.05
+        top = rng.uniform(0, 60) + (rng.uniform(-0.3, 0.3) * np.arange(K) if trial % 2 else 0.0)
+        bottom = top + rng.uniform(20, 120)
+        table = np.zeros((K, 8))
+        for q, a in enumerate((d, sigma_d, np.asarray(top + 0.0 * d), np.asarray(bottom + 0.0 * d))):
+            table[:, 2 * q] = a
+            table[:-1, 2 * q + 1] = a[1:] - a[:-1]
+        h, w = int(rng.integers(1, 150)), int(rng.integers(1, 90))
+        c0, v0 = int(rng.integers(max(0, u0 - 60), u0 + K)), int(rng.integers(0, 40))
+        sub = (np.interp(np.arange(c0, c0 + w) + 20.0, np.arange(u0, u0 + K), d)[None, :]
+               + rng.normal(0, rng.uniform(0.1, 3.0), (h, w))).astype(np.float32)
+        sub[rng.random((h, w)) < rng.uniform(0, 0.4)] = np.nan
+        sub = np.asfortranarray(sub)[:, ::-1][:, ::-1] if trial % 3 == 0 else sub  # a strided box too
+        w0, w1 = sorted(rng.integers(c0 - 5, c0 + w + 5, 2))
+        w0 = max(w0, 0)
+        if w1 < w0:
+            continue
+        for outward in (-1, 1):
+            for hole in (0, 3, 60):
+                rows, cols = L._right_row_ends(sub, c0, v0, u0, table, 3.0, 4.0, int(w0), int(w1), outward, hole)
+                want = L._robust_minimum_variance(cols, 3.0, float(w0), float(w1))
+                got = L._right_end_column(sub, c0, v0, u0, table, 3.0, 4.0, int(w0), int(w1), outward, hole, 3.0,
+                                          float(w0), float(w1))
+                assert_same(tuple(map(float, got)), tuple(map(float, want)))
+                n += len(rows)
+    assert n > 1000

@@ -423,8 +423,17 @@ def _left_end_column(block, v0, u0, c0, c1, outward, max_hole, k, lo, hi):  # pr
 def _right_end_column(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole, k, lo,
                       hi):  # pragma: no cover - numba
     """:func:`search_boundary`'s right image: :func:`_right_row_ends` of the window's columns ``w0 … w1``, then
-    :func:`_robust_minimum_variance` of the rows' columns (``k``, ``lo``, ``hi``), in one call."""
-    _, cols = _right_row_ends(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole)
+    :func:`_robust_minimum_variance` of the rows' columns (``k``, ``lo``, ``hi``), in one call. The rows whose
+    band test passes on its rows' part whatever the column (between the lowest top and the highest bottom the table
+    interpolates, a 1e-6 px margin for the interpolation's rounding) test the disparity only
+    (:func:`_right_row_ends_in`): the same pixels, the same walk."""
+    K = table.shape[0]
+    top, bottom = table[0, 4], table[0, 6]
+    for j in range(K):
+        top = max(top, table[j, 4])
+        bottom = min(bottom, table[j, 6])
+    _, cols = _right_row_ends_in(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole,
+                                 top - row_margin + 1e-6, bottom + row_margin - 1e-6)
     return _robust_minimum_variance(cols, k, lo, hi)
 
 
@@ -554,6 +563,72 @@ def _right_pixel(sub, i, k, c0, v0, u0, table, gate, row_margin):  # pragma: no 
     vt = table[j, 5] * frac + table[j, 4]
     vb = table[j, 7] * frac + table[j, 6]
     return v >= vt - row_margin and v <= vb + row_margin
+
+
+@njit(cache=True, inline="always")
+def _right_pixel_in(sub, i, k, c0, v0, u0, table, gate, row_margin, rows_sure):  # pragma: no cover - numba
+    """:func:`_right_pixel`, its rows' part left out when ``rows_sure`` (the row passes it at every column)."""
+    if not rows_sure:
+        return _right_pixel(sub, i, k, c0, v0, u0, table, gate, row_margin)
+    K = table.shape[0]
+    u_last = u0 + K - 1
+    disp = float(sub[i, k])
+    u = float(c0 + k) + disp
+    if not (u >= u0 and u <= u_last):  # also NaN
+        return False
+    j = int(u - u0)
+    if j == K - 1:
+        return abs(disp - table[j, 0]) <= gate * table[j, 2]
+    frac = u - float(u0 + j)
+    dp = table[j, 1] * frac + table[j, 0]
+    sp = table[j, 3] * frac + table[j, 2]
+    return abs(disp - dp) <= gate * sp
+
+
+@njit(cache=True)
+def _right_row_ends_in(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole, v_sure_lo,
+                       v_sure_hi):  # pragma: no cover - numba
+    """:func:`_right_row_ends` with the rows ``v_sure_lo <= v <= v_sure_hi`` tested on their disparity only
+    (:func:`_right_pixel_in`): the same walk, the same rows and columns."""
+    h, w = sub.shape
+    n = w1 - w0 + 1
+    first = w1 if outward < 0 else w0
+    step = -1 if outward < 0 else 1
+    rows = np.empty(h, dtype=np.int64)
+    cols = np.empty(h, dtype=np.float64)
+    k = 0
+    for i in range(h):
+        v = float(v0 + i)
+        sure = v >= v_sure_lo and v <= v_sure_hi
+        start = n
+        for j in range(n):
+            c = first + step * j - c0
+            if 0 <= c < w and _right_pixel_in(sub, i, c, c0, v0, u0, table, gate, row_margin, sure):
+                start = j
+                break
+        last = -1
+        j = start + 1
+        while j < n:
+            c = first + step * j - c0
+            if 0 <= c < w and _right_pixel_in(sub, i, c, c0, v0, u0, table, gate, row_margin, sure):
+                j += 1
+                continue
+            q = j + 1
+            while q < n and q - j <= max_hole:
+                c = first + step * q - c0
+                if 0 <= c < w and _right_pixel_in(sub, i, c, c0, v0, u0, table, gate, row_margin, sure):
+                    break
+                q += 1
+            if q < n and q - j <= max_hole:
+                j = q
+            else:
+                last = j - 1
+                break
+        if last >= 0:
+            rows[k] = v0 + i
+            cols[k] = float(first + step * last)
+            k += 1
+    return rows[:k].copy(), cols[:k].copy()
 
 
 @njit(cache=True)

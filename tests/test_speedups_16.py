@@ -713,6 +713,28 @@ def _right_box(prediction, disparity_right: np.ndarray, row_margin: float = 0.0,
     if v1 < v0:
         return disparity_right[:0, :0], 0, 0
     return disparity_right[v0 : v1 + 1, c0 : c1 + 1], v0, c0
+
+
+def boundary_disagreement(b: Boundary, plane, X, cov_X) -> tuple[float, float]:
+    t = b.inward
+    off = float((b.P - plane.edge(b.edge)) @ t)
+    X = np.asarray(X, dtype=float)
+    J = np.array([[1.0, 0.0, -(b.P[1] - X[1])], [0.0, 1.0, b.P[0] - X[0]]])  # ∂P/∂(x, y, θ)
+    Jt = t @ J
+    return off, float(np.sqrt(b.sigma_along**2 + Jt @ np.asarray(cov_X, dtype=float) @ Jt))
+
+
+def wall_columns(camera: StereoCamera, fit: PlaneFit, search_sigma: float) -> tuple[float, float]:
+    lo, hi = -np.inf, np.inf
+    for name, e in fit.prediction.edges.items():
+        if not np.isfinite(e.u).all():
+            continue
+        w_lo, w_hi = e.window(0, search_sigma)
+        if _inner_columns(camera, fit.X, fit.plane, name, 0.1)[0] >= e.u[0]:  # the wall lies right of this end
+            lo = w_lo if lo == -np.inf else min(lo, w_lo)
+        else:
+            hi = w_hi if hi == np.inf else max(hi, w_hi)
+    return float(lo), float(hi)
 '''
 
 
@@ -967,6 +989,11 @@ def test_edge_helpers_are_the_former(scenario_frames, scenario_models, former):
                             ref_l["edge_depth_step"](camera, X, world_map, fit.plane, edge, offset))
             assert_same(L.edge_incidence(camera, X, fit.plane, edge),
                         ref_l["edge_incidence"](camera, X, fit.plane, edge))
+            assert_same(L.wall_columns(camera, f, sigma), ref_l["wall_columns"](camera, f, sigma))
+            for b in plane.boundaries:
+                for cov in (COV_PRIOR, COV_PRIOR * 9):
+                    assert_same(L.boundary_disagreement(b, fit.plane, X, cov),
+                                ref_l["boundary_disagreement"](b, fit.plane, X, cov))
             n += 1
         for b in plane.boundaries + [b for b, _ in plane.rejected_boundaries if b is not None]:
             for fraction in (0.3, 0.6):

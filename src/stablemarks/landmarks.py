@@ -2195,8 +2195,8 @@ def boundary_disagreement(b: Boundary, plane, X, cov_X) -> tuple[float, float]:
     ``cov_X`` (3, 3) carried through the rigid placement ``P = R(θ) p + (x, y)``, projected on the wall."""
     t = b.inward
     off = float((b.P - plane.edge(b.edge)) @ t)
-    X = np.asarray(X, dtype=float)
-    J = np.array([[1.0, 0.0, -(b.P[1] - X[1])], [0.0, 1.0, b.P[0] - X[0]]])  # ∂P/∂(x, y, θ)
+    (p0, p1), (x0, x1, _) = np.asarray(b.P, dtype=float).tolist(), np.asarray(X, dtype=float).tolist()
+    J = np.array([[1.0, 0.0, -(p1 - x1)], [0.0, 1.0, p0 - x0]])  # ∂P/∂(x, y, θ)
     Jt = t @ J
     return off, float(np.sqrt(b.sigma_along**2 + Jt @ np.asarray(cov_X, dtype=float) @ Jt))
 
@@ -2259,10 +2259,11 @@ def wall_columns(camera: StereoCamera, fit: PlaneFit, search_sigma: float) -> tu
     unbounded beyond an end that is behind the camera."""
     lo, hi = -np.inf, np.inf
     for name, e in fit.prediction.edges.items():
-        if not np.isfinite(e.u).all():
+        u_l, u_r = e.u.tolist()
+        if not (math.isfinite(u_l) and math.isfinite(u_r)):
             continue
         w_lo, w_hi = e.window(0, search_sigma)
-        if _inner_columns(camera, fit.X, fit.plane, name, 0.1)[0] >= e.u[0]:  # the wall lies right of this end
+        if _inner_columns(camera, fit.X, fit.plane, name, 0.1)[0] >= u_l:  # the wall lies right of this end
             lo = w_lo if lo == -np.inf else min(lo, w_lo)
         else:
             hi = w_hi if hi == np.inf else max(hi, w_hi)

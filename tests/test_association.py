@@ -308,3 +308,46 @@ def test_associations_within_one_sad_window_count_as_one_line():
     assert lone_gate_px(wide, [(a, 0), (b, 1)], 0.0, apart, 15.0) == 0.0
     assert lone_gate_px(wide, [(a, 0), (b, 1)], 0.0, close, 5.0) == 0.0
     assert lone_gate_px(wide, [(a, 0), (b, 1)], 0.0) == 0.0  # without the lines' columns: two lines
+
+
+# ---------------------------------------------------------------- a landmark beside its wall's end
+def _beside_end(merge_px):
+    """A filter with a landmark 3 px inside the wall's end p1 and one far from it; the frame's lines: the wall's
+    end (where the detector merges the end and the landmark's line) and the far landmark's line."""
+    from stablemarks.estimation import EKFConfig
+
+    s_near = 3.0 * 4.0 / CAMERA.f  # 3 px at the wall's 4 m
+    ekf = JointEKF(CAMERA, X0, COV_POSE, EKFConfig(merge_px=merge_px))
+    ekf = _ekf(s=(s_near, 1.3), polarity=(0, 0), ekf=ekf)
+    end = CAMERA.project_columns(X0, WALL.point_at(np.array([0.0])))
+    far = CAMERA.project_columns(X0, WALL.point_at(np.array([1.3])))
+    measured = np.concatenate([end, far])
+    model = SimpleNamespace(planes=[], predictions=[SimpleNamespace(
+        edges={"p1": SimpleNamespace(free=True, u=end[0]), "p2": SimpleNamespace(free=False, u=end[0] * 0)})])
+    return ekf, measured, model
+
+
+def test_a_landmark_on_the_line_of_its_wall_s_end_is_not_associated():
+    ids = None
+    for merge_px, expect_near in ((0.0, True), (5.0, False)):
+        ekf, measured, model = _beside_end(merge_px)
+        ids = ekf.landmark_ids
+        got = associate_frame(ekf, _Pairs(len(measured)), measured, 0.0, model)
+        assert (ids[1], 1) in got  # the landmark far from the end is found either way
+        assert ((ids[0], 0) in got) == expect_near
+    # the test is on the predicted columns: both images count, and only free edges
+    from stablemarks.estimation import merged_with_edges
+
+    ekf, measured, model = _beside_end(5.0)
+    assert merged_with_edges(ekf, ekf.landmark_ids, 0.0, model.predictions, 5.0) == {ekf.landmark_ids[0]}
+    assert merged_with_edges(ekf, ekf.landmark_ids, 0.0, model.predictions, 2.0) == set()
+    model.predictions[0].edges["p1"].free = False
+    assert merged_with_edges(ekf, ekf.landmark_ids, 0.0, model.predictions, 5.0) == set()
+
+
+def test_merge_px_must_be_a_non_negative_number():
+    from stablemarks.estimation import EKFConfig
+
+    for bad in (-1.0, float("nan"), True, "5"):
+        with pytest.raises(ConfigError, match="ekf.merge_px"):
+            EKFConfig(merge_px=bad)

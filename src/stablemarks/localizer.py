@@ -35,7 +35,7 @@ from scipy.stats import binom
 from .config import Config
 from .errors import GeometryError, InputError, expected
 from .estimation import JointEKF, LandmarkEstimate, motion
-from .estimation.association import lone_gate_px
+from .estimation.association import lone_gate_px, merged_with_edges
 from .estimation.consistency import inflate_inconsistent
 from .estimation.relocalize import lines_score, pose_from_lines
 from .geometry import SE2, StereoCamera, wrap_angle
@@ -650,9 +650,13 @@ class Localizer:
             return []
         modelled = {m.fit.plane.id for m in model.planes if m.boundaries}
         seen = {i for i, _ in assoc}
+        view = self.ekf.visible(pan, self._max_incidence)
+        # one merged with a wall's end was not looked for (ekf.merge_px): not finding it says nothing against it
+        merged = merged_with_edges(self.ekf, view, pan, model.predictions, self.config.ekf.merge_px) \
+            if self.config.ekf.merge_px > 0 else set()
         out = []
-        for i in self.ekf.visible(pan, self._max_incidence):
-            if i in dropped:
+        for i in view:
+            if i in dropped or i in merged:
                 continue
             if i in seen:
                 self._missed.pop(i, None)

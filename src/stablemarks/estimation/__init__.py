@@ -7,23 +7,31 @@ polarity); :mod:`.relocalize` finds the pose from the landmarks on a frame's lin
 lost it (a slip, a kidnap).
 """
 
-from .association import associate_frame, height_cost, is_duplicate, match_along_wall, polarity_cost, wall_polarity
+from .association import (
+                          associate_frame,
+                          height_cost,
+                          is_duplicate,
+                          match_along_wall,
+                          merged_with_edges,
+                          polarity_cost,
+                          wall_polarity,
+)
 from .ekf import (
-    BLAS_PIN_MIN_DIM,
-    EDGES,
-    KINDS,
-    EKFConfig,
-    JointEKF,
-    LandmarkEstimate,
-    NewLandmark,
-    ObservationPrediction,
-    UpdateResult,
-    _add_sym_rank,
-    motion,
+                          BLAS_PIN_MIN_DIM,
+                          EDGES,
+                          KINDS,
+                          EKFConfig,
+                          JointEKF,
+                          LandmarkEstimate,
+                          NewLandmark,
+                          ObservationPrediction,
+                          UpdateResult,
+                          _add_sym_rank,
+                          motion,
 )
 
 __all__ = [
     "BLAS_PIN_MIN_DIM", "EDGES", "KINDS", "EKFConfig", "JointEKF", "LandmarkEstimate", "NewLandmark",
     "ObservationPrediction", "UpdateResult", "_add_sym_rank", "associate_frame", "height_cost", "is_duplicate",
-    "match_along_wall", "motion", "polarity_cost", "wall_polarity",
+    "match_along_wall", "merged_with_edges", "motion", "polarity_cost", "wall_polarity",
 ]

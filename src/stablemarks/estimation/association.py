@@ -22,7 +22,8 @@ from scipy.optimize import linear_sum_assignment
 
 from .ekf import JointEKF
 
-__all__ = ["associate_frame", "height_cost", "is_duplicate", "match_along_wall", "polarity_cost", "wall_polarity"]
+__all__ = ["associate_frame", "height_cost", "is_duplicate", "match_along_wall", "merged_with_edges", "polarity_cost",
+           "wall_polarity"]
 
 
 def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, model=None,
@@ -52,6 +53,8 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
         polarity, centre = np.zeros(len(measured), dtype=int), np.zeros(2)
     polarity = np.asarray(polarity, dtype=int)
     in_view = set(ekf.visible(pan, max_incidence))
+    if ekf.config.merge_px > 0 and model is not None and in_view:
+        in_view -= merged_with_edges(ekf, sorted(in_view), pan, model.predictions, ekf.config.merge_px)
     walls: list[list[tuple[int, int]]] = []
     if model is not None:
         for plane_model in model.planes:
@@ -112,6 +115,19 @@ def associate_frame(ekf: JointEKF, pairs, measured: np.ndarray, pan: float, mode
     if report is not None:
         report["compatible"], report["incompatible"], report["ambiguous"] = kept, rejected, ambiguous
     return sorted(chosen, key=lambda q: q[1])
+
+
+def merged_with_edges(ekf: JointEKF, ids, pan: float, predictions, merge_px: float) -> set[int]:
+    """Landmarks ``ids`` whose predicted line lies within ``merge_px`` of the predicted image of a free edge
+    (:class:`~stablemarks.planes.EdgePrediction` of ``predictions``, at the same prior mean) in the left or
+    the right image: the detector finds the two as one line (:attr:`EKFConfig.merge_px`)."""
+    edges = np.array([e.u for pred in (predictions or []) for e in pred.edges.values()
+                      if e.free and np.isfinite(e.u).all()], dtype=float).reshape(-1, 2)
+    if not len(edges) or not len(ids):
+        return set()
+    uv = ekf.predict_observation(ids, pan).uv
+    near = (np.abs(uv[:, None, :] - edges[None, :, :]) < merge_px).any(axis=(1, 2))
+    return {int(i) for i, n in zip(ids, near, strict=True) if n}
 
 
 def lone_gate_px(ekf: JointEKF, pairs: list[tuple[int, int]], pan: float, columns=None, within: float = 0.0) -> float:

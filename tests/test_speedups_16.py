@@ -735,6 +735,38 @@ def wall_columns(camera: StereoCamera, fit: PlaneFit, search_sigma: float) -> tu
         else:
             hi = w_hi if hi == np.inf else max(hi, w_hi)
     return float(lo), float(hi)
+
+
+def nearer_silhouettes(camera: StereoCamera, X, cov_X, world_map: Map, plane, min_offset: float = 0.1,
+                       max_step_px: float = np.inf) -> list[tuple[int, float, float, tuple[float, float]]]:
+    out = []
+    fb = camera.f * camera.baseline
+    centres = camera.optical_centres(X)
+    offsets = [float(plane.offset(O)) for O in centres]
+    walls, ends, oE_all = _wall_ends(world_map, plane)
+    if not len(walls):
+        return out
+    a = np.abs(oE_all)
+    skip = np.ones(len(a), dtype=bool)
+    for oO in offsets:
+        skip &= (oO * oE_all <= 0) | (a < min_offset) | (a >= abs(oO))
+    todo = np.flatnonzero(~skip).tolist()
+    for start in range(0, len(todo), _FEW_ENDS):
+        chunk = todo[start : start + _FEW_ENDS]
+        uvs, Js, _ = camera.project_columns(X, ends[chunk], jacobians=True)
+        for q, i in enumerate(chunk):
+            w, E, oE = walls[i // 2], ends[i], float(oE_all[i])
+            uv, J = uvs[q], Js[q].copy()  # a fresh (2, 3) array, as the projection of the one end gave it
+            for img in (0, 1):
+                O = centres[img]
+                oO = offsets[img]
+                if not np.isfinite(uv[img]) or oO * oE <= 0 or abs(oE) < min_offset or abs(oE) >= abs(oO):
+                    continue  # not in front of the camera, or not between the camera and the wall
+                W = O + oO / (oO - oE) * (E - O)  # where the sight line past the end meets the wall
+                if fb / np.hypot(*(E - O)) - fb / np.hypot(*(W - O)) > max_step_px:
+                    continue
+                out.append((img, float(uv[img]), float(np.sqrt(max(J[img] @ cov_X @ J[img], 0.0))), tuple(w.z)))
+    return out
 '''
 
 
@@ -990,6 +1022,9 @@ def test_edge_helpers_are_the_former(scenario_frames, scenario_models, former):
             assert_same(L.edge_incidence(camera, X, fit.plane, edge),
                         ref_l["edge_incidence"](camera, X, fit.plane, edge))
             assert_same(L.wall_columns(camera, f, sigma), ref_l["wall_columns"](camera, f, sigma))
+            for step in (np.inf, 0.6):
+                assert_same(L.nearer_silhouettes(camera, X, COV_PRIOR, world_map, fit.plane, max_step_px=step),
+                            ref_l["nearer_silhouettes"](camera, X, COV_PRIOR, world_map, fit.plane, max_step_px=step))
             for b in plane.boundaries:
                 for cov in (COV_PRIOR, COV_PRIOR * 9):
                     assert_same(L.boundary_disagreement(b, fit.plane, X, cov),

@@ -1776,12 +1776,10 @@ def nearer_silhouettes(camera: StereoCamera, X, cov_X, world_map: Map, plane, mi
     walls, ends, oE_all = _wall_ends(world_map, plane)
     if not len(walls):
         return out
-    a = np.abs(oE_all)
-    # not between either camera and the wall: no projection needed
-    skip = np.ones(len(a), dtype=bool)
-    for oO in offsets:
-        skip &= (oO * oE_all <= 0) | (a < min_offset) | (a >= abs(oO))
-    todo = np.flatnonzero(~skip).tolist()
+    # not between either camera and the wall: no projection needed (the array test's products and comparisons, on
+    # the ends' Python floats)
+    todo = [i for i, oE in enumerate(oE_all.tolist())
+            if not all((oO * oE <= 0) or (abs(oE) < min_offset) or (abs(oE) >= abs(oO)) for oO in offsets)]
     for start in range(0, len(todo), _FEW_ENDS):
         chunk = todo[start : start + _FEW_ENDS]
         uvs, Js, _ = camera.project_columns(X, ends[chunk], jacobians=True)

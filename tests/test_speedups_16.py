@@ -1147,3 +1147,29 @@ def test_right_rows_tested_on_their_disparity_only_walk_the_same():
                 assert_same(tuple(map(float, got)), tuple(map(float, want)))
                 n += len(rows)
     assert n > 1000
+
+
+def test_row_ends_looked_for_from_the_outer_side_are_the_walks():
+    """When every hole is bridged, :func:`~stablemarks.landmarks._left_end_column`'s row ends (from the window's
+    outer side, :func:`~stablemarks.landmarks._block_row_ends_back`) are :func:`~stablemarks.landmarks._block_row_ends`'
+    walk's: random regions with holes, runs that reach the outer side, rows without a pixel, windows beyond the block,
+    both directions, holes just wide enough and wider."""
+    rng = np.random.default_rng(11)
+    n_rows = 0
+    for _ in range(400):
+        h, w = int(rng.integers(1, 40)), int(rng.integers(1, 60))
+        block = rng.random((h, w)) < rng.uniform(0.1, 0.95)
+        block[rng.random(h) < 0.2] = False
+        u0, v0 = int(rng.integers(0, 30)), int(rng.integers(0, 30))
+        c0, c1 = sorted(rng.integers(u0 - 5, u0 + w + 5, 2))
+        c0 = max(c0, 0)
+        if c1 < c0:
+            continue
+        for outward in (-1, 1):
+            for extra in (0, 1, 50):
+                hole = c1 - c0 - 1 + extra
+                want = L._block_row_ends(block, v0, u0, int(c0), int(c1), outward, hole)
+                got = L._block_row_ends_back(block, v0, u0, int(c0), int(c1), outward)
+                assert_same(got, want)
+                n_rows += len(want[0])
+    assert n_rows > 1000

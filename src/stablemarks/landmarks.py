@@ -414,9 +414,40 @@ def minimum_variance_column(cols: np.ndarray, lo: float, hi: float) -> tuple[flo
 @njit(cache=True)
 def _left_end_column(block, v0, u0, c0, c1, outward, max_hole, k, lo, hi):  # pragma: no cover - numba
     """:func:`search_boundary`'s left image: :func:`_block_row_ends` of the window's columns ``c0 … c1``, then
-    :func:`_robust_minimum_variance` of the rows' columns (``k``, ``lo``, ``hi``), in one call."""
-    _, cols = _block_row_ends(block, v0, u0, c0, c1, outward, max_hole)
+    :func:`_robust_minimum_variance` of the rows' columns (``k``, ``lo``, ``hi``), in one call; the row ends looked
+    for from the window's outer side when any hole is bridged (:func:`_block_row_ends_back`)."""
+    if max_hole >= c1 - c0 - 1:
+        _, cols = _block_row_ends_back(block, v0, u0, c0, c1, outward)
+    else:
+        _, cols = _block_row_ends(block, v0, u0, c0, c1, outward, max_hole)
     return _robust_minimum_variance(cols, k, lo, hi)
+
+
+@njit(cache=True)
+def _block_row_ends_back(block, v0, u0, c0, c1, outward):  # pragma: no cover - numba
+    """:func:`_block_row_ends` when any hole is bridged (``max_hole >= n − 2``, ``n = c1 − c0 + 1``: from any hole its
+    walk looks to the window's outer side): a row's run ends at the last region pixel of the window, none when that
+    is the outer side's own or there is none — looked for from the outer side, the same rows and columns."""
+    h, w = block.shape
+    n = c1 - c0 + 1
+    first = c1 if outward < 0 else c0
+    step = -1 if outward < 0 else 1
+    rows = np.empty(h, dtype=np.int64)
+    cols = np.empty(h, dtype=np.float64)
+    k = 0
+    for i in range(h):
+        last = -1
+        for j in range(n - 1, -1, -1):
+            c = first + step * j - u0
+            if 0 <= c < w and block[i, c]:
+                if j < n - 1:
+                    last = j
+                break
+        if last >= 0:
+            rows[k] = v0 + i
+            cols[k] = float(first + step * last)
+            k += 1
+    return rows[:k].copy(), cols[:k].copy()
 
 
 @njit(cache=True)
@@ -589,7 +620,10 @@ def _right_pixel_in(sub, i, k, c0, v0, u0, table, gate, row_margin, rows_sure): 
 def _right_row_ends_in(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole, v_sure_lo,
                        v_sure_hi):  # pragma: no cover - numba
     """:func:`_right_row_ends` with the rows ``v_sure_lo <= v <= v_sure_hi`` tested on their disparity only
-    (:func:`_right_pixel_in`): the same walk, the same rows and columns."""
+    (:func:`_right_pixel_in`): the same rows and columns. When any hole is bridged (``max_hole >= n − 2``: from
+    any hole the walk looks to the window's outer side), the walk ends after the last region pixel of the window,
+    none when that is the outer side's own (the run goes through) or there is none: that pixel is looked for from
+    the outer side, without testing the run's pixels."""
     h, w = sub.shape
     n = w1 - w0 + 1
     first = w1 if outward < 0 else w0
@@ -597,9 +631,23 @@ def _right_row_ends_in(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward
     rows = np.empty(h, dtype=np.int64)
     cols = np.empty(h, dtype=np.float64)
     k = 0
+    backward = max_hole >= n - 2
     for i in range(h):
         v = float(v0 + i)
         sure = v >= v_sure_lo and v <= v_sure_hi
+        if backward:
+            last = -1
+            for j in range(n - 1, -1, -1):
+                c = first + step * j - c0
+                if 0 <= c < w and _right_pixel_in(sub, i, c, c0, v0, u0, table, gate, row_margin, sure):
+                    if j < n - 1:
+                        last = j
+                    break
+            if last >= 0:
+                rows[k] = v0 + i
+                cols[k] = float(first + step * last)
+                k += 1
+            continue
         start = n
         for j in range(n):
             c = first + step * j - c0

@@ -105,7 +105,24 @@ def test_stage_times_time_the_pipeline_as_the_localizer_runs_it():
                 "ratio_disparity_dense_vs_stereobm", "ratio_run_pipeline_vs_stereobm"):
         assert out[key] > 0, key
     assert out["pipeline_fps"] == pytest.approx(1000.0 / out["pipeline_ms"])
+    for key, ratio in (("pipeline", "ratio_pipeline_vs_stereobm"), ("disparity_alone", "ratio_disparity_vs_stereobm"),
+                       ("disparity_dense", "ratio_disparity_dense_vs_stereobm")):
+        ref, own = out[f"paired_{key}_ms"]  # the goals' ratios: each against the StereoBM calls timed in turn with it
+        assert ref > 0 and own > 0
+        assert out[ratio] == pytest.approx(own / ref)
     assert out["run_frames"] == [0]
+
+
+def test_paired_medians_time_both_in_turn():
+    """Rounds of a block of reference calls then a block of the function's, the first of each block not counted;
+    ``timing`` reads the function's own time from what it returns."""
+    from stablemarks.bench import paired_medians
+
+    calls = []
+    ref, own = paired_medians(lambda: calls.append("r"), lambda: calls.append("f") or {"t": 0.25}, rounds=2,
+                              block=3, timing=lambda out: out["t"])
+    assert calls == ["r"] * 3 + ["f"] * 3 + ["r"] * 3 + ["f"] * 3
+    assert own == 0.25 and 0 < ref < 0.25
 
 
 def test_lap_source_renders_nothing_for_dead_reckoning(monkeypatch):

@@ -330,3 +330,32 @@ def test_a_free_edge_seen_more_obliquely_than_the_entry_limit_is_not_searched():
                for _, why in side[0].rejected_boundaries)
     wide = select_landmarks(front, sc.camera, sc.map, X, cov, Config(landmarks=LandmarkConfig(max_incidence_deg=85.0)))
     assert [m.searched for m in wide.planes if m.fit.plane.id == "side"] == [["p2"]]
+
+
+# ---------------------------------------------------------------- a line beside another (landmarks.min_line_gap_px)
+def test_a_candidate_with_another_line_a_few_pixels_away_is_not_entered():
+    from dataclasses import replace
+
+    from stablemarks.landmarks import REASON_BESIDE_LINE, beside_another_line
+
+    base = select([_cand(0.5), _cand(0.9), _cand(1.3)], [])
+    assert all(c.selected for c in base)
+    cands = [replace(c, u_left=u) for c, u in zip(base, (300.0, 340.0, 380.0), strict=True)]
+    # the left image's lines: each candidate's own (300.2: the same edge in another piece, under 1 px), one 3 px
+    # beside the second, one 6 px beside the third
+    columns = [300.0, 300.2, 340.0, 343.0, 380.0, 386.0]
+    out = beside_another_line(cands, columns, 4.0)
+    assert [c.selected for c in out] == [True, False, True]
+    assert out[1].reason == REASON_BESIDE_LINE
+    out = beside_another_line(cands, columns, 7.0)
+    assert [c.selected for c in out] == [True, False, False]
+    # a candidate already rejected keeps its reason
+    rejected = replace(cands[1], selected=False, reason=REASON_CONTRAST)
+    assert beside_another_line([rejected], columns, 4.0)[0].reason == REASON_CONTRAST
+
+
+def test_min_line_gap_px_must_be_a_non_negative_number():
+    for bad in (-1.0, float("inf"), True, "4"):
+        with pytest.raises(InputError, match="landmarks.min_line_gap_px"):
+            LandmarkConfig(min_line_gap_px=bad)
+    assert LandmarkConfig().min_line_gap_px == 0.0

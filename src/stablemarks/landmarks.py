@@ -43,6 +43,7 @@ REASON_FAR = "too far"
 REASON_OBLIQUE = "too oblique"
 REASON_BESIDE_NEARER = "beside something nearer"
 REASON_SCATTER = "wall's lines scatter about its fit"
+REASON_BESIDE_LINE = "beside another line"
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,9 @@ class LandmarkConfig:
         v = self.off_wall_min_lines
         if isinstance(v, bool) or not isinstance(v, int) or v < 0:
             raise InputError(expected("a whole number >= 0", v, where="landmarks.off_wall_min_lines"))
+        v = self.min_line_gap_px
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v >= 0):
+            raise InputError(expected("a number of pixels >= 0 (0: off)", v, where="landmarks.min_line_gap_px"))
         if not (np.isfinite(self.min_contrast) and self.min_contrast >= 0):
             raise InputError(expected("a number of gray levels >= 0", self.min_contrast,
                                       where="landmarks.min_contrast"))
@@ -182,6 +186,13 @@ class LandmarkConfig:
     few pixels wide there, stays in). With ``stablemarks eval`` (5 trials):
     office precision 0.89 → 0.92, storeroom landmark NEES 0.63 → 0.14 and recall 0.48 → 0.52, lab, room and
     corridor unchanged. None turns it off."""
+    min_line_gap_px: float = 0.0
+    """A candidate with another line of the left image between 1 px and this far from it [px] is not entered
+    ("beside another line"). The detector (Sobel_x, non-maximum suppression along the row) places each of two
+    edges 3 px apart 0.15 px toward the other, frame after frame, and from 5 px apart within 0.05 px
+    (``tests/test_segments.py``); such a bias is no noise the filter can average away (the office's whiteboard:
+    a 2 cm dark line's two edges, 0.15 px inside it in 41 frames out of 41, 2.5 times a measured σ_img of
+    0.06 px). Lines under 1 px apart are the same edge in pieces. 0: off."""
     min_edge_step_sigma: float = 3.0
     """A free edge is searched only where the map puts something at a different depth just beyond it: the
     disparity step the map predicts across the edge must reach this many σ of the disparity noise
@@ -1270,6 +1281,21 @@ def select(candidates: list[Candidate], boundaries: list[Boundary], config: Land
     return out
 
 
+def beside_another_line(candidates: list[Candidate], columns, gap_px: float) -> list[Candidate]:
+    """``candidates`` with those selected whose left column has another of ``columns`` (the left image's
+    segments, [px]) between 1 px and ``gap_px`` from it rejected as :data:`REASON_BESIDE_LINE`
+    (:attr:`LandmarkConfig.min_line_gap_px`)."""
+    u = np.asarray(columns, dtype=float)
+    out = []
+    for c in candidates:
+        if c.selected:
+            d = np.abs(u - c.u_left)
+            if np.any((d >= 1.0) & (d < gap_px)):
+                c = _replace(c, selected=False, reason=REASON_BESIDE_LINE)
+        out.append(c)
+    return out
+
+
 def on_wall_reason(c: Candidate, config: LandmarkConfig, z_range: tuple[float, float] | None = None) -> str:
     """Why candidate ``c`` is not a line on its wall, or "": its triangulated position is off the fitted plane
     by more than ``off_wall_sigma`` σ (:attr:`LandmarkConfig.off_wall_sigma` states the smallest offset
@@ -1570,6 +1596,8 @@ def landmarks_on_plane(
     # Features near it are near a boundary too.
     mapped = mapped_boundaries(fit.plane, boundaries, ref)
     cands = select(cands, boundaries + mapped, config, fit.plane.z)
+    if config.min_line_gap_px > 0:
+        cands = beside_another_line(cands, left_segments.u, config.min_line_gap_px)
     if disparity_left is not None and config.nearer_fraction < 1.0:
         slope = left_segments.slope[pairs.left_index]
         chosen = [c for c in cands if c.selected]

@@ -202,7 +202,7 @@ def stage_times(repeats: int = 15, run_frames: tuple[int, ...] = (0, 5, 10, 15, 
         # out 20-26 ms in runs where the same call took 14-15 ms later on (a shared 2-core machine); the smaller
         # reference can only make our ratios larger
         out["stereobm"] = min(out["stereobm"], median_time(lambda: bm.compute(left, right), repeats))
-        # the three ratios the issue sets goals for, each from StereoBM calls interleaved with its own
+        # the three ratios with goals, each against StereoBM calls timed in blocks alternating with its own
         paired = {}
         rounds = max(2, (repeats + 2) // 3)  # 3 timed calls of each per round: about as many as the blocks above
 

@@ -694,44 +694,8 @@ def _right_row_ends_in(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward
 def _right_row_ends(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole):  # pragma: no cover
     """:func:`_block_row_ends` (window columns ``w0 … w1``) of the block :func:`_right_band` makes of ``sub`` (rows
     ``v0 …``, columns ``c0 …``), each pixel tested (:func:`_right_pixel`) only when the walk reads it: the same
-    walk, the same rows and columns."""
-    h, w = sub.shape
-    n = w1 - w0 + 1
-    first = w1 if outward < 0 else w0
-    step = -1 if outward < 0 else 1
-    rows = np.empty(h, dtype=np.int64)
-    cols = np.empty(h, dtype=np.float64)
-    k = 0
-    for i in range(h):
-        start = n
-        for j in range(n):
-            c = first + step * j - c0
-            if 0 <= c < w and _right_pixel(sub, i, c, c0, v0, u0, table, gate, row_margin):
-                start = j
-                break
-        last = -1
-        j = start + 1
-        while j < n:
-            c = first + step * j - c0
-            if 0 <= c < w and _right_pixel(sub, i, c, c0, v0, u0, table, gate, row_margin):
-                j += 1
-                continue
-            q = j + 1
-            while q < n and q - j <= max_hole:
-                c = first + step * q - c0
-                if 0 <= c < w and _right_pixel(sub, i, c, c0, v0, u0, table, gate, row_margin):
-                    break
-                q += 1
-            if q < n and q - j <= max_hole:
-                j = q
-            else:
-                last = j - 1
-                break
-        if last >= 0:
-            rows[k] = v0 + i
-            cols[k] = float(first + step * last)
-            k += 1
-    return rows[:k].copy(), cols[:k].copy()
+    walk, the same rows and columns (:func:`_right_row_ends_in` with no row tested on its disparity alone)."""
+    return _right_row_ends_in(sub, c0, v0, u0, table, gate, row_margin, w0, w1, outward, max_hole, np.inf, -np.inf)
 
 
 @njit(cache=True)

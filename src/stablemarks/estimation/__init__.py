@@ -8,26 +8,26 @@ lost it (a slip, a kidnap).
 """
 
 from .association import (
-                          associate_frame,
-                          height_cost,
-                          is_duplicate,
-                          match_along_wall,
-                          merged_with_edges,
-                          polarity_cost,
-                          wall_polarity,
+    associate_frame,
+    height_cost,
+    is_duplicate,
+    match_along_wall,
+    merged_with_edges,
+    polarity_cost,
+    wall_polarity,
 )
 from .ekf import (
-                          BLAS_PIN_MIN_DIM,
-                          EDGES,
-                          KINDS,
-                          EKFConfig,
-                          JointEKF,
-                          LandmarkEstimate,
-                          NewLandmark,
-                          ObservationPrediction,
-                          UpdateResult,
-                          _add_sym_rank,
-                          motion,
+    BLAS_PIN_MIN_DIM,
+    EDGES,
+    KINDS,
+    EKFConfig,
+    JointEKF,
+    LandmarkEstimate,
+    NewLandmark,
+    ObservationPrediction,
+    UpdateResult,
+    _add_sym_rank,
+    motion,
 )
 
 __all__ = [

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from stablemarks.config import Config
+from stablemarks.errors import InputError
 from stablemarks.landmarks import (
     REASON_FAR,
     REASON_HEIGHT,
@@ -431,6 +432,42 @@ def test_a_wall_whose_lines_scatter_about_its_fit_is_not_modelled():
     assert np.isnan(wall_line_scatter(PlaneLandmarks(fit, [], np.zeros(0, int), mixed[:9]), 10))
     (_, same_b), _ = off_wall_by_lines([a, b], LandmarkConfig(off_wall_min_lines=0), sigma_img=0.25)
     assert same_b is b
+
+
+def test_scatter_px_sets_the_scatter_tests_tolerance_apart_from_the_filters_line_noise():
+    """``landmarks.scatter_px`` is the column noise a wall's lines may scatter by: with the filter's line noise
+    narrowed to 0.06 px, a wall whose lines scatter by 0.1 px (1.7 times that) is still modelled when the test
+    allows 0.25 px, and refused when it allows 0.06 px (what None, the filter's value, gives)."""
+    from types import SimpleNamespace
+
+    from stablemarks.landmarks import REASON_SCATTER, PlaneLandmarks, off_wall_by_lines, wall_line_scatter
+
+    rng = np.random.default_rng(7)
+    fit = SimpleNamespace(plane=SimpleNamespace(label="north wall"))
+    # offsets with a robust scale of 1.7 times the candidates' σ_line: lines that scatter by 0.1 px at 0.06 px
+    from scipy.stats import norm
+
+    lines = _lines(0.1 * 1.7 * rng.permutation(norm.ppf((np.arange(30) + 0.5) / 30)))
+    wall = PlaneLandmarks(fit, [], np.zeros(0, int), lines)
+    assert 1.5 < wall_line_scatter(wall, 10) < 1.9
+    (refused,), _ = off_wall_by_lines([wall], LandmarkConfig(), sigma_img=0.06)
+    assert all(c.reason == REASON_SCATTER for c in refused.candidates)
+    (same,), _ = off_wall_by_lines([wall], LandmarkConfig(scatter_px=0.06), sigma_img=0.06)
+    assert all(c.reason == REASON_SCATTER for c in same.candidates)
+    (kept,), _ = off_wall_by_lines([wall], LandmarkConfig(scatter_px=0.25), sigma_img=0.06)
+    assert not any(c.reason == REASON_SCATTER for c in kept.candidates)
+    # a wall mixed with a cabinet (lines 8 times the filter's noise) is refused either way
+    mixed = PlaneLandmarks(fit, [], np.zeros(0, int), _lines(0.1 * 8.0 * rng.standard_normal(30)))
+    (out,), _ = off_wall_by_lines([mixed], LandmarkConfig(scatter_px=0.25), sigma_img=0.06)
+    assert all(c.reason == REASON_SCATTER for c in out.candidates)
+    (why,) = [w for _, w in out.rejected_boundaries]
+    assert "times farther from the fitted wall than the line noise allows" in why
+
+
+@pytest.mark.parametrize("value", [0, -0.1, "wide", True])
+def test_scatter_px_must_be_a_positive_number_or_null(value):
+    with pytest.raises(InputError, match="landmarks.scatter_px"):
+        LandmarkConfig(scatter_px=value)
 
 
 def test_a_scattered_wall_is_named_in_the_frames_warnings(monkeypatch):

@@ -69,6 +69,10 @@ class LandmarkConfig:
         v = self.off_wall_min_lines
         if isinstance(v, bool) or not isinstance(v, int) or v < 0:
             raise InputError(expected("a whole number >= 0", v, where="landmarks.off_wall_min_lines"))
+        v = self.scatter_px
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0)):
+            raise InputError(expected("a positive number of pixels, or null (noise.sigma_img)", v,
+                                      where="landmarks.scatter_px"))
         v = self.min_line_gap_px
         if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v >= 0):
             raise InputError(expected("a number of pixels >= 0 (0: off)", v, where="landmarks.min_line_gap_px"))
@@ -193,6 +197,13 @@ class LandmarkConfig:
     (``tests/test_segments.py``); such a bias is no noise the filter can average away (the office's whiteboard:
     a 2 cm dark line's two edges, 0.15 px inside it in 41 frames out of 41, 2.5 times a measured σ_img of
     0.06 px). Lines under 1 px apart are the same edge in pieces. 0: off."""
+    scatter_px: float | None = None
+    """The column noise [px] a wall's lines may show about its fitted line before the wall is not modelled in a
+    frame (:func:`wall_line_scatter`, "the fit mixes the wall with something in front of it"); None:
+    ``noise.sigma_img``. The test guards against fits that take in clutter, whose lines scatter by many times
+    the line noise, so its tolerance is what lines on one wall can scatter by, not the filter's noise: with
+    ``noise.sigma_img`` set to the lines' usual error (0.06 px) the same test refused walls whose lines scatter
+    by 0.1 px (the storeroom's north wall after a blind stretch, 1.7–5 times "too far")."""
     min_edge_step_sigma: float = 3.0
     """A free edge is searched only where the map puts something at a different depth just beyond it: the
     disparity step the map predicts across the edge must reach this many σ of the disparity noise
@@ -1323,8 +1334,9 @@ def off_wall_by_lines(models: list[PlaneLandmarks], config: LandmarkConfig, sigm
     landmark's re-check read one), with a sentence in its ``rejected_boundaries``, and its lines do not count in
     the frame's scale."""
     kept = []
+    limit = 1.0 if config.scatter_px is None else config.scatter_px / sigma_img
     for m in models:
-        scatter = wall_line_scatter(m, config.off_wall_min_lines)
+        scatter = wall_line_scatter(m, config.off_wall_min_lines) / limit
         if scatter > 1.0:
             cands = [_replace(c, selected=False, reason=REASON_SCATTER) for c in m.candidates]
             why = (f"plane {m.fit.plane.label!r}: its {len(cands)} lines lie {scatter:.1f} times farther from the "
@@ -2253,15 +2265,17 @@ def boundaries_apart(models: list[PlaneLandmarks], config: LandmarkConfig) -> di
     the same way in :func:`landmarks_on_plane`."""
     found = [(m.fit.plane, b) for m in models for b in m.boundaries]
     out: dict[tuple[str, str], str] = {}
+    covs = [b.cov for _, b in found]
     for i, (plane_i, bi) in enumerate(found):
-        for plane_j, bj in found[i + 1:]:
+        for j in range(i + 1, len(found)):
+            plane_j, bj = found[j]
             if plane_i.id == plane_j.id:
                 continue
             d = bj.P - bi.P
             d_map = plane_j.edge(bj.edge) - plane_i.edge(bi.edge)
             n, n_map = float(np.hypot(*d)), float(np.hypot(*d_map))
             u = d / n if n > 1e-9 else (d_map / n_map if n_map > 1e-9 else np.array([1.0, 0.0]))
-            sigma = float(np.sqrt(u @ (bi.cov + bj.cov) @ u))
+            sigma = float(np.sqrt(u @ (covs[i] + covs[j]) @ u))
             if abs(n - n_map) > config.boundary_gate_sigma * sigma:
                 why = (f"the boundaries found at {plane_i.label!r} {bi.edge} and {plane_j.label!r} {bj.edge} are "
                        f"{100 * n:.1f} cm apart, the map's free edges {100 * n_map:.1f} cm (σ {100 * sigma:.1f} cm): "

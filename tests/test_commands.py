@@ -184,6 +184,21 @@ def test_preset_paper_on_run_eval_and_select(rendered, tmp_path, capsys, monkeyp
     assert seen[-1].noise.sigma_img == paper
 
 
+def test_preset_narrow_is_the_narrow_noise_with_its_rules():
+    """The ``narrow`` preset: line and boundary noise 0.06 px with the plane gates kept as the defaults' (the
+    disparity noise they imply), no σ floor, the missing-variance test, blind entries widened, lines 4 px apart;
+    everything else the defaults'."""
+    from stablemarks.config import Config
+
+    narrow, default = Config.preset("narrow"), Config()
+    assert (narrow.noise.sigma_img, narrow.noise.boundary_px) == (0.06, 0.06)
+    assert narrow.noise.free_boundary_px == default.noise.free_boundary_px
+    assert narrow.planes.disparity_noise_px == 0.354
+    assert narrow.ekf.landmark_sigma_floor == 0.0 and narrow.ekf.inflation_p == 0.001
+    assert narrow.ekf.widen_blind_entries and narrow.landmarks.min_line_gap_px == 4.0
+    assert narrow.sad == default.sad and narrow.health == default.health and narrow.segments == default.segments
+
+
 def test_preset_then_config_file_then_set(tmp_path, capsys):
     """Precedence: the preset, then what --config names, then --set."""
     from .test_sources import write_lab_sequence

@@ -217,7 +217,8 @@ def preset_arg(parser: argparse.ArgumentParser) -> None:
     from ..config import PRESETS
 
     parser.add_argument("--preset", choices=list(PRESETS), default=None,
-                        help="start from a named configuration (paper: the paper's noise values, σ_img 0.5 px); "
+                        help="start from a named configuration (paper: the paper's noise values, σ_img 0.5 px; "
+                             "narrow: line noise 0.06 px and the rules that go with it, see the README); "
                              "--config and --set change it further")
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from stablemarks.cli import main
-from stablemarks.estimation.relocalize import pose_from_lines
+from stablemarks.estimation.relocalize import pose_from_lines, resection_cov
 from stablemarks.geometry import StereoCamera, wrap_angle
 from stablemarks.metrics import pose_nees
 from stablemarks.sim.export import write_simulated_sequence
@@ -180,18 +180,19 @@ def test_no_relocalization_where_the_associations_already_fit_most_landmarks():
     assert max(nees) < 11.34  # χ²₃ 99 %
 
 
-def _one_wall_localizer(lab_scenario, sigmas):
-    """A localizer facing a wall 3.5 m ahead (the map's walls do not matter here), with point landmarks on that
-    wall over 0.5 m, each with its own σ [m]."""
-    from stablemarks.estimation import NewLandmark
-    from stablemarks.localizer import Localizer
-
+def _one_wall(sigmas):
+    """A pose facing a wall 3.5 m ahead and points on that wall over 0.5 m, each with its own σ [m] (isotropic)."""
     pose = np.array([0.0, 0.0, np.pi / 2])
-    loc = Localizer(lab_scenario.map, lab_scenario.camera, start_pose=pose, start_cov=np.diag([1e-4, 1e-4, 1e-5]))
     xs = np.linspace(-0.25, 0.25, len(sigmas))
-    ids = [loc.ekf.add_landmarks([NewLandmark.point((x, 3.5))], s**2 * np.eye(2))[0]
-           for x, s in zip(xs, sigmas, strict=True)]
-    return loc, pose, ids
+    points = np.stack([xs, np.full(len(xs), 3.5)], axis=1)
+    covs = np.array([s**2 * np.eye(2) for s in sigmas])
+    return pose, points, covs
+
+
+def _resected(camera, pose, points, covs):
+    """:func:`resection_cov` as the localizer calls it: 0.18 px (three σ_img of 0.06), a 2 m region and a heading
+    gate of 3 · 1 mrad + 1°."""
+    return resection_cov(camera, pose, points, covs, 0.18, radius=2.0, heading=0.003 + np.radians(1.0))
 
 
 def test_a_pose_resected_from_one_frontal_wall_is_uncertain_across_the_line_of_sight(lab_scenario):
@@ -199,11 +200,9 @@ def test_a_pose_resected_from_one_frontal_wall_is_uncertain_across_the_line_of_s
     columns is barely resolved by the disparity's change across the view. The relocalized pose's covariance says so
     (σ across the view tens of millimetres, heading of the order of the search gate), where the isotropic σ of
     before held it to millimetres; landmarks on a second wall at another depth resolve it."""
-    from stablemarks.estimation import NewLandmark
-
-    loc, pose, ids = _one_wall_localizer(lab_scenario, [0.001] * 6)
     cam = lab_scenario.camera
-    cov = loc._resection_cov(cam, pose, ids, 0.18)
+    pose, points, covs = _one_wall([0.001] * 6)
+    cov = _resected(cam, pose, points, covs)
     assert np.all(np.linalg.eigvalsh(cov) > 0) and np.allclose(cov, cov.T)
     assert np.sqrt(cov[1, 1]) < 0.02  # the range: millimetres to a centimetre
     assert np.sqrt(cov[0, 0]) > 0.03 and np.sqrt(cov[2, 2]) > 0.008  # across the view, and the heading
@@ -212,19 +211,19 @@ def test_a_pose_resected_from_one_frontal_wall_is_uncertain_across_the_line_of_s
     v = V[:, -1]
     assert abs(abs(v[0] / v[2]) - 3.5) < 0.7
     # a second wall 1.5 m nearer, off to the side, fixes it
-    more = [loc.ekf.add_landmarks([NewLandmark.point((x, 2.0))], 1e-6 * np.eye(2))[0] for x in (-0.9, -0.7)]
-    cov2 = loc._resection_cov(cam, pose, ids + more, 0.18)
+    more = np.array([[-0.9, 2.0], [-0.7, 2.0]])
+    cov2 = _resected(cam, pose, np.concatenate([points, more]), np.concatenate([covs, [1e-6 * np.eye(2)] * 2]))
     assert np.sqrt(cov2[0, 0]) < 0.5 * np.sqrt(cov[0, 0]) and np.sqrt(cov2[2, 2]) < 0.5 * np.sqrt(cov[2, 2])
 
 
 def test_uncertain_landmarks_do_not_pin_a_resected_pose(lab_scenario):
     """Landmarks known to 4 cm weigh as little as their σ says: the range's variance with them added to six good
     ones on the same wall stays near the six's (within 40 %), and is wider than if they were known to a millimetre."""
-    loc, pose, ids = _one_wall_localizer(lab_scenario, [0.001] * 6 + [0.04] * 4)
     cam = lab_scenario.camera
-    good = loc._resection_cov(cam, pose, ids[:6], 0.18)
-    with_poor = loc._resection_cov(cam, pose, ids, 0.18)
-    loc2, _, ids2 = _one_wall_localizer(lab_scenario, [0.001] * 10)
-    with_good = loc2._resection_cov(cam, pose, ids2, 0.18)
+    pose, points, covs = _one_wall([0.001] * 6 + [0.04] * 4)
+    good = _resected(cam, pose, points[:6], covs[:6])
+    with_poor = _resected(cam, pose, points, covs)
+    _, _, covs_good = _one_wall([0.001] * 10)
+    with_good = _resected(cam, pose, points, covs_good)
     assert with_poor[1, 1] > 0.6 * good[1, 1]
     assert with_poor[1, 1] > 1.5 * with_good[1, 1]

@@ -2265,17 +2265,15 @@ def boundaries_apart(models: list[PlaneLandmarks], config: LandmarkConfig) -> di
     the same way in :func:`landmarks_on_plane`."""
     found = [(m.fit.plane, b) for m in models for b in m.boundaries]
     out: dict[tuple[str, str], str] = {}
-    covs = [b.cov for _, b in found]
     for i, (plane_i, bi) in enumerate(found):
-        for j in range(i + 1, len(found)):
-            plane_j, bj = found[j]
+        for plane_j, bj in found[i + 1:]:
             if plane_i.id == plane_j.id:
                 continue
             d = bj.P - bi.P
             d_map = plane_j.edge(bj.edge) - plane_i.edge(bi.edge)
             n, n_map = float(np.hypot(*d)), float(np.hypot(*d_map))
             u = d / n if n > 1e-9 else (d_map / n_map if n_map > 1e-9 else np.array([1.0, 0.0]))
-            sigma = float(np.sqrt(u @ (covs[i] + covs[j]) @ u))
+            sigma = float(np.sqrt(u @ (bi.cov + bj.cov) @ u))
             if abs(n - n_map) > config.boundary_gate_sigma * sigma:
                 why = (f"the boundaries found at {plane_i.label!r} {bi.edge} and {plane_j.label!r} {bj.edge} are "
                        f"{100 * n:.1f} cm apart, the map's free edges {100 * n_map:.1f} cm (σ {100 * sigma:.1f} cm): "

@@ -37,7 +37,7 @@ from .errors import GeometryError, InputError, expected
 from .estimation import JointEKF, LandmarkEstimate, motion
 from .estimation.association import lone_gate_px, merged_with_edges
 from .estimation.consistency import inflate_inconsistent
-from .estimation.relocalize import lines_score, pose_from_lines
+from .estimation.relocalize import lines_score, pose_from_lines, resection_cov
 from .geometry import SE2, StereoCamera, wrap_angle
 from .health import HealthMonitor
 from .landmarks import SLOPE_GATE_CHI2, common_turn, fit_disagreements, seen_wall_jacobian
@@ -597,9 +597,10 @@ class Localizer:
         P = np.array([ekf.landmark_position(i) for i in ids])
         pairs = front.kept_pairs
         tight = 3.0 * self.camera.sigma_img
+        heading = 3.0 * math.sqrt(ekf.cov_pose[2, 2]) + math.radians(1.0)
         place = pose_from_lines(cam_k, P, ids, pairs.u_left, pairs.u_right, ekf.pose, radius=h.relocalize_radius,
-                                heading=3.0 * math.sqrt(ekf.cov_pose[2, 2]) + math.radians(1.0),
-                                tol_px=h.relocalize_tol_px, tight_px=tight, sigma_img=self.camera.sigma_img)
+                                heading=heading, tol_px=h.relocalize_tol_px, tight_px=tight,
+                                sigma_img=self.camera.sigma_img)
         if place is None or len(place.inliers) < max(h.min_pattern + 1, place.runner_up + 2):
             return None, 1.0
         if found is not None:
@@ -611,35 +612,18 @@ class Localizer:
             if local is not None and len(place.inliers) < 2 * lines_score(cam_k, local, P, pairs.u_left,
                                                                           pairs.u_right, tight):
                 return None, 1.0
-        depth = cam_k.to_camera(place.pose, P[[ids.index(i) for i in place.inliers]])[1]
+        inliers = P[[ids.index(i) for i in place.inliers]]
+        depth = cam_k.to_camera(place.pose, inliers)[1]
         s_th = 3.0 * tight / cam_k.f
         s_xy = s_th * float(np.median(depth))
-        cov = np.diag([s_xy**2, s_xy**2, s_th**2]) + self._resection_cov(cam_k, place.pose, place.inliers, tight)
+        # the isotropic σ, and the resection's own: what the inliers leave open (a shift with its turn, seen from
+        # one frontal wall) stays uncertain
+        covs = np.array([ekf.landmark_cov2d(i) for i in place.inliers])
+        cov = np.diag([s_xy**2, s_xy**2, s_th**2]) + resection_cov(cam_k, place.pose, inliers, covs, tight,
+                                                                   radius=h.relocalize_radius, heading=heading)
         probe = ekf.copy()
         probe.reset_pose(place.pose, cov)
         return probe, max(1.0, float(np.trace(cov[:2, :2]) / np.trace(ekf.cov_pose[:2, :2])))
-
-    def _resection_cov(self, cam_k: StereoCamera, pose, ids, sigma_px: float) -> np.ndarray:
-        """The covariance of a pose resected from the columns of the landmarks ``ids`` seen from ``pose``: each
-        landmark's two columns good to ``sigma_px`` and uncertain by its own position's covariance seen through
-        the camera (``R_i = σ² I + J_p Σ_p J_pᵀ``), ``(Σ J_Xᵀ R_i⁻¹ J_X)⁻¹`` with the directions they do not fix
-        bounded by the relocalization's search region (``health.relocalize_radius``, and the heading gate of 3 σ
-        + 1°, as 1 σ). Landmarks on one wall a few decimetres apart at 4 m fix the pose's position along their
-        line of sight and little else: a shift across it with a turn that keeps every column where it is is as
-        likely as the place found. Lab, narrow noise (trial 11 of 20, frame 5): six landmarks over 0.55 m of a
-        partition, good to a millimetre, and four of a white board 40 mm uncertain; the place found 35 mm and
-        10 mrad off along that direction fitted all ten, and the isotropic σ alone (4 mm, 1 mrad) held it there
-        with NEES 175."""
-        P = np.array([self.ekf.landmark_position(i) for i in ids])
-        _, J_X, J_p = cam_k.project_columns(np.asarray(pose, dtype=float), P, jacobians=True)
-        info = np.zeros((3, 3))
-        for i, jx, jp in zip(ids, J_X, J_p, strict=True):
-            R = sigma_px**2 * np.eye(2) + jp @ self.ekf.landmark_cov2d(i) @ jp.T
-            info += jx.T @ np.linalg.solve(R, jx)
-        h = self.config.health
-        heading = 3.0 * math.sqrt(self.ekf.cov_pose[2, 2]) + math.radians(1.0)
-        cov = np.linalg.inv(info + np.diag([h.relocalize_radius**-2, h.relocalize_radius**-2, heading**-2]))
-        return 0.5 * (cov + cov.T)
 
     def _walls_missed(self, model: FrameLandmarks | None, assoc, pan: float, record: FrameRecord) -> frozenset[str]:
         """Ids of the walls modelled in this frame (a boundary found) that hold landmarks predicted in view of which

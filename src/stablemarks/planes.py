@@ -1035,27 +1035,11 @@ def _at_least(cov: np.ndarray, other: np.ndarray) -> np.ndarray:
     return np.array([[out11, out12], [out12, out22]])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _wall_points(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu):  # pragma: no cover - numba
     """``(s, o, σ_o)`` (n,) of the band pixels in rows ``i0, i0 + step, …`` and columns ``k0, k0 + step, …``
-    of the box, row by row."""
-    h, K = disp.shape
-    n = 0
-    for i in range(i0, h, step):
-        for k in range(k0, K, step):
-            n += band[i, k]
-    s = np.empty(n)
-    o = np.empty(n)
-    sigma = np.empty(n)
-    n = 0
-    for i in range(i0, h, step):
-        for k in range(k0, K, step):
-            if band[i, k]:
-                Z = fb / float(disp[i, k])
-                s[n] = c_s + Z * r_s[k]
-                o[n] = c_o + Z * r_o[k]
-                sigma[n] = abs(r_o[k]) * (Z * Z / fb * sigma_nu) + 1e-6
-                n += 1
+    of the box, row by row (:func:`_wall_points_weights` without the weights and columns)."""
+    s, o, sigma, _, _ = _wall_points_weights(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu)
     return s, o, sigma
 
 
@@ -1087,9 +1071,10 @@ def _band_counts(disp, v0, d, sigma_d, v_top, v_bottom, gate, row_margin, i_half
 
 @njit(cache=True, error_model="numpy")
 def _wall_points_weights(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma_nu):  # pragma: no cover - numba
-    """:func:`_wall_points` with each point's weight ``1 / σ_o²`` and box column: ``(s, o, σ_o, w, column)`` (n,),
-    the same arithmetic (and ``w`` that of ``1.0 / σ_o**2``); the columns written in the points' own pass (a second
-    pass over the band's pixels, as ragged as the first, cost ~10 µs a wall)."""
+    """``(s, o, σ_o, w, column)`` (n,) of the band pixels in rows ``i0, i0 + step, …`` and columns ``k0, k0 + step,
+    …`` of the box, row by row: each point's along-wall position and offset, its σ, weight ``1 / σ_o²`` and box
+    column, the columns written in the points' own pass (a second pass over the band's pixels, as ragged as the
+    first, cost ~10 µs a wall)."""
     h, K = band.shape
     n = 0
     for i in range(i0, h, step):
@@ -1100,7 +1085,7 @@ def _wall_points_weights(disp, band, i0, k0, step, r_s, r_o, c_s, c_o, fb, sigma
     sigma = np.empty(n)
     column = np.empty(n, dtype=np.int64)
     j = 0
-    for i in range(i0, h, step):  # _wall_points' loop, row by row
+    for i in range(i0, h, step):
         for k in range(k0, K, step):
             if band[i, k]:
                 Z = fb / float(disp[i, k])

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..geometry import StereoCamera, wrap_angle
 
-__all__ = ["LineRelocation", "pose_from_lines"]
+__all__ = ["LineRelocation", "pose_from_lines", "resection_cov"]
 
 
 @dataclass(frozen=True)
@@ -134,6 +134,25 @@ def pose_from_lines(camera: StereoCamera, landmarks: np.ndarray, ids, u_left, u_
     runner_up = int(counts[far].max()) if far.any() else 0
     inliers = tuple(int(v) for v in ids[matched[best]])
     return LineRelocation(refined[best].copy(), inliers, runner_up)
+
+
+def resection_cov(camera: StereoCamera, pose, points: np.ndarray, point_covs: np.ndarray, sigma_px: float, *,
+                  radius: float, heading: float) -> np.ndarray:
+    """(3, 3) covariance of a robot pose resected from the columns of ``points`` (m, 2) [m] seen from ``pose``:
+    each point's two columns good to ``sigma_px`` and uncertain by its own position's covariance ``point_covs``
+    (m, 2, 2) [m²] seen through the camera (``R_i = σ² I + J_p Σ_p J_pᵀ``), ``(Σ J_Xᵀ R_i⁻¹ J_X)⁻¹``, with the
+    directions they do not fix bounded by the region searched (``radius`` [m] for the position, ``heading``
+    [rad], each as one σ). Landmarks on one wall a few decimetres apart at 4 m fix the pose's position along
+    their line of sight and little else: a shift across it with a turn that keeps every column where it is is
+    as likely as the place found. Lab, narrow noise (trial 11 of 20, frame 5): six landmarks over 0.55 m of a
+    partition, good to a millimetre, and four of a white board 40 mm uncertain; the place found 35 mm and 10 mrad
+    off along that direction fitted all ten, and an isotropic σ (4 mm, 1 mrad) held it there with NEES 175."""
+    _, J_X, J_p = camera.project_columns(np.asarray(pose, dtype=float), np.asarray(points, dtype=float),
+                                         jacobians=True)
+    R = sigma_px**2 * np.eye(2) + J_p @ np.asarray(point_covs, dtype=float) @ np.swapaxes(J_p, 1, 2)
+    info = np.einsum("mji,mjk->ik", J_X, np.linalg.solve(R, J_X))
+    cov = np.linalg.inv(info + np.diag([radius**-2, radius**-2, heading**-2]))
+    return 0.5 * (cov + cov.T)
 
 
 def lines_score(camera: StereoCamera, pose, landmarks: np.ndarray, u_left, u_right, tol_px: float) -> int:

@@ -21,6 +21,7 @@ wider match would count as large errors).
 
     python benchmarks/entry_errors.py lab room corridor --trials 6 --frames 40
     python benchmarks/entry_errors.py corridor --trials 6 --frames 40 --set noise.boundary_px=0.5
+    python benchmarks/entry_errors.py office hall --trials 4 --frames 0 --preset narrow
 """
 
 import argparse
@@ -100,9 +101,10 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=6)
     ap.add_argument("--frames", type=int, default=40, help="first N frames of each run (0: all)")
     ap.add_argument("--match", type=float, default=0.05, help="largest distance to a true feature [m] (0.05)")
+    ap.add_argument("--preset", default=None, help="start from a named configuration (paper, narrow)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="configuration override")
     args = ap.parse_args()
-    config = Config()
+    config = Config.preset(args.preset) if args.preset else Config()
     for item in args.set:
         key, _, value = item.partition("=")
         section, _, field = key.partition(".")

@@ -404,10 +404,11 @@ def main(argv=None) -> None:
                         help="skimage.data photographs tiled as the walls' base, comma-separated (default %(default)s)")
     parser.add_argument("--reuse", action="store_true",
                         help="run on the folders an earlier call left in --out (no simulating or rendering)")
+    parser.add_argument("--preset", default=None, help="passed to `stablemarks run` (paper, narrow)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="passed to `stablemarks run` (repeatable)")
     args = parser.parse_args(argv)
-    config = [a for s in args.set for a in ("--set", s)]
+    config = ([] if args.preset is None else ["--preset", args.preset]) + [a for s in args.set for a in ("--set", s)]
     print(f"pose NEES bounds of one run (3 dof, 95 %): {BOUNDS_1RUN}; geom: share of whole-labelled pixels of the "
           "left images where pybullet and the project's caster see different objects (worst frame)")
     print(HEADER, flush=True)

@@ -186,8 +186,8 @@ def test_preset_paper_on_run_eval_and_select(rendered, tmp_path, capsys, monkeyp
 
 def test_preset_narrow_is_the_narrow_noise_with_its_rules():
     """The ``narrow`` preset: line and boundary noise 0.06 px with the plane gates kept as the defaults' (the
-    disparity noise they imply), no σ floor, the missing-variance test, blind entries widened, lines 4 px apart;
-    everything else the defaults'."""
+    disparity noise they imply), a σ floor of 0.2 mm per metre of range (no fixed one), the missing-variance test,
+    blind entries widened, lines 4 px apart; everything else the defaults'."""
     from stablemarks.config import Config
 
     narrow, default = Config.preset("narrow"), Config()
@@ -195,6 +195,7 @@ def test_preset_narrow_is_the_narrow_noise_with_its_rules():
     assert narrow.noise.free_boundary_px == default.noise.free_boundary_px
     assert narrow.planes.disparity_noise_px == 0.354
     assert narrow.ekf.landmark_sigma_floor == 0.0 and narrow.ekf.inflation_p == 0.001
+    assert narrow.ekf.landmark_sigma_floor_per_m == 0.0002
     assert narrow.ekf.widen_blind_entries and narrow.landmarks.min_line_gap_px == 4.0
     assert narrow.sad == default.sad and narrow.health == default.health and narrow.segments == default.segments
 

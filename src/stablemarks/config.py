@@ -235,7 +235,8 @@ PRESETS = {
               "planes": {"fit_covariance": "independent"}},
     "narrow": {"noise": {"sigma_img": 0.06, "boundary_px": 0.06},
                "planes": {"disparity_noise_px": 0.354},
-               "ekf": {"landmark_sigma_floor": 0.0, "inflation_p": 0.001, "widen_blind_entries": True},
+               "ekf": {"landmark_sigma_floor": 0.0, "landmark_sigma_floor_per_m": 0.0002, "inflation_p": 0.001,
+                       "widen_blind_entries": True},
                "landmarks": {"min_line_gap_px": 4.0}},
 }
 """Named configurations: ``paper`` — the paper's σ_img = 0.5 px (Sec 2.3.1), a boundary known to within the
@@ -243,10 +244,13 @@ SAD window (``w / sqrt(12)``), which reproduce Table 1's σ, and a filter
 that uses a boundary only to model landmarks (no ``ekf.edge_updates``) and tests a line's offset from its wall
 with the model's noise alone (``landmarks.off_wall_min_lines`` 0), as the paper's; the defaults are
 measured instead (``stablemarks calibrate-noise``). ``narrow`` — line and snapped-boundary noise the size of
-the simulator's usual errors (0.06 px), the plane gates as the defaults', no landmark σ floor, the variance the
-frame's innovations show missing added (``ekf.inflation_p``), landmarks entered blind as uncertain along their
-wall as the pose, and no line entered within 4 px of another: nearer to consistent on clean scenes than the
-defaults, overconfident on some frames of cluttered ones (``docs/uncertainty.md``, "The narrow preset")."""
+the simulator's usual errors (0.06 px), the plane gates as the defaults', a landmark σ floor of 0.2 mm per metre
+of range instead of the defaults' 5 mm (a line's error that stays with it is an angle: 0.1 px at f = 500 px;
+without it the loop's landmarks, seen a hundred times and more, end held to 0.2 mm with errors of 1–3 mm), the
+variance the frame's innovations show missing added (``ekf.inflation_p``), landmarks entered blind as uncertain
+along their wall as the pose, and no line entered within 4 px of another: nearer to consistent on clean scenes
+than the defaults, overconfident on some frames of cluttered ones (``docs/uncertainty.md``, "The narrow
+preset")."""
 
 
 MAX_SETTING = 1e9

@@ -29,6 +29,7 @@ import argparse
 import numpy as np
 import yaml
 
+from stablemarks.commands._common import preset_arg
 from stablemarks.config import Config
 from stablemarks.evaluation import DEFAULT_COV0, start_belief, trial_seeds
 from stablemarks.localizer import Localizer
@@ -101,7 +102,7 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=6)
     ap.add_argument("--frames", type=int, default=40, help="first N frames of each run (0: all)")
     ap.add_argument("--match", type=float, default=0.05, help="largest distance to a true feature [m] (0.05)")
-    ap.add_argument("--preset", default=None, help="start from a named configuration (paper, narrow)")
+    preset_arg(ap)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="configuration override")
     args = ap.parse_args()
     config = Config.preset(args.preset) if args.preset else Config()

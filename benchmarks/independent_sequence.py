@@ -67,6 +67,7 @@ from tests.independent_render import (  # noqa: E402
     gray_photo,
 )
 
+from stablemarks.commands._common import preset_arg  # noqa: E402
 from stablemarks.io.sequence import load_sequence  # noqa: E402
 from stablemarks.metrics import ate_rmse, pose_nees  # noqa: E402
 from stablemarks.sim.scenario import Scenario, count_frames, load_scenario  # noqa: E402
@@ -404,7 +405,7 @@ def main(argv=None) -> None:
                         help="skimage.data photographs tiled as the walls' base, comma-separated (default %(default)s)")
     parser.add_argument("--reuse", action="store_true",
                         help="run on the folders an earlier call left in --out (no simulating or rendering)")
-    parser.add_argument("--preset", default=None, help="passed to `stablemarks run` (paper, narrow)")
+    preset_arg(parser)  # passed on to `stablemarks run`
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="passed to `stablemarks run` (repeatable)")
     args = parser.parse_args(argv)

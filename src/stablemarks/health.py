@@ -45,7 +45,8 @@ condition's name first):
     (``odometry_disagrees``) in ``max_recoveries`` of the last ``recoveries_frames`` frames (a slip or a kidnap is
     an event; the images and the odometry disagreeing again and again is a wrong model: the corridor without its
     pans, eight recoveries in 42 frames), and when, after such a recovery within ``recoveries_frames`` frames, the
-    free edges are not found where the map puts them (``edges_not_found``): a pose recovered from a true slip puts
+    free edges are not found where the map puts them in ``edges_frames`` frames in a row after it (frames before it
+    do not count: the edges missed in a blind turn are what a recovery corrects): a pose recovered from a true slip puts
     the walls back where the map has them, one recovered from lines seen under a wrong pan does not (the corridor
     without its pans, with ``noise.boundary_px`` 0.5: one recovery at frame 30, the edges missed from frame 41 on,
     and the recovered pose held 1.42 times dead reckoning's ATE). From then on the estimate is dead reckoning (the pose

@@ -402,6 +402,8 @@ class Localizer:
         self._missed: dict[int, int] = {}
         self._recoveries: collections.deque = collections.deque()
         """Frames of the last ``health.recoveries_frames`` in which the pose was recovered (``odometry_disagrees``)."""
+        self._missed_after_recovery = 0
+        """Frames in a row, since the last recovery, whose free edges were not found where the map puts them."""
         self._found = list(FOUND_PRIOR)
         """Landmarks found and missed among those predicted in view, over the frames where a pattern of at least
         ``health.min_pattern`` was used, plus :data:`FOUND_PRIOR`: the run's rate of finding landmarks in view."""
@@ -1077,12 +1079,21 @@ class Localizer:
         if method.uses_vision and self.health.drift is None:
             if recovering:
                 self._recoveries.append(k)
+                self._missed_after_recovery = 0
+            else:
+                self._missed_after_recovery = self._missed_after_recovery + 1 \
+                    if edges_missing or not edges_found else 0
             h = self.config.health
             while self._recoveries and self._recoveries[0] <= k - h.recoveries_frames:
                 self._recoveries.popleft()
+            # A recovered pose is not confirmed when the free edges are then missed where the map puts them from it,
+            # in health.edges_frames frames in a row after it (not when missed before it: the edges a pose off in a
+            # blind turn misses are what the recovery corrects, and one wall fitted across clutter in the next frame
+            # is no evidence against it)
             drift = self._heading_drift() or \
                 ((0.0, 0.0, "recoveries") if len(self._recoveries) >= h.max_recoveries else None) or \
-                ((0.0, 0.0, "unconfirmed") if self._recoveries and not recovering and pan_suspect else None)
+                ((0.0, 0.0, "unconfirmed") if self._recoveries and not recovering
+                 and self._missed_after_recovery >= h.edges_frames else None)
         if drift is not None:
             # the images' heading has run away from the odometry's: fall back on dead reckoning (module health)
             self.ekf.reset_pose(self._dead_reckoning.as_array(), self._dr_cov)

@@ -64,7 +64,8 @@ def test_summary_has_all_keys(lab_eval):
         assert set(SUMMARY_KEYS) <= set(s), method
         assert s["trials"] == 2 and s["frames"] == 3
         assert s["nees_pose_bounds"] == pytest.approx([0.6187, 7.2247], abs=1e-3)  # χ²(6) / 2
-        assert 0.0 <= s["nees_pose_fraction_inside"] <= 1.0
+        assert 0.0 <= s["nees_pose_fraction_inside"] <= 1.0 and 0.0 <= s["nees_pose_fraction_above"] <= 1.0
+        assert s["nees_pose_fraction_inside"] + s["nees_pose_fraction_above"] <= 1.0
     full = summary["lab"]["stablemarks"]
     assert full["nis_count"] > 0 and full["nees_landmark_count"] > 0
     assert 0.0 <= full["selection_precision"] <= 1.0 and 0.0 <= full["selection_recall"] <= 1.0
@@ -120,6 +121,7 @@ def test_summarize_by_hand():
     s = summarize(rs)["s"]
     full, nosel, dr = s["stablemarks"], s["plane_no_selection"], s["dead_reckoning"]
     assert full["nees_pose_fraction_inside"] == 0.5 and nosel["nees_pose_fraction_inside"] == 1.0
+    assert full["nees_pose_fraction_above"] == 0.5 and nosel["nees_pose_fraction_above"] == 0.0
     assert full["nees_pose_mean"] == pytest.approx(51.5)
     assert full["nees_pose_time"] == [3.0, 100.0]
     assert full["ate_rmse"] == pytest.approx(0.05) and full["ate_ratio_dead_reckoning"] == pytest.approx(0.25)

@@ -22,7 +22,8 @@ Metrics (per scenario and method; :mod:`stablemarks.metrics` defines NEES, NIS, 
 
 - ``nees_pose_mean`` — mean pose NEES over all frames and trials (3 dof); ``nees_pose_bounds`` — the 95 %
   bounds ``[χ²⁻¹(0.025; 3N)/N, χ²⁻¹(0.975; 3N)/N]`` of an N-trial average; ``nees_pose_fraction_inside`` —
-  fraction of the frames whose N-trial average NEES lies inside those bounds.
+  fraction of the frames whose N-trial average NEES lies inside those bounds; ``nees_pose_fraction_above`` —
+  the fraction above them (overconfident; the rest of the frames outside lie below, cautious).
 - ``nees_landmark_mean`` with ``nees_landmark_bounds`` — 1-dof NEES along the true feature's wall of each
   landmark at the end of its run (for a wall landmark ``(s − s_true)² / var_s`` with ``s_true`` measured
   from the landmark's own edge), averaged over the M landmarks of all trials, bounds for M values
@@ -101,7 +102,7 @@ DEFAULT_COV0 = np.diag([0.05, 0.05, np.deg2rad(1.0)]) ** 2
 """Covariance of the start pose belief (σ = 5 cm, 5 cm, 1°), as in :func:`~stablemarks.online.run_online`."""
 
 SUMMARY_KEYS = (
-    "trials", "frames", "nees_pose_mean", "nees_pose_bounds", "nees_pose_fraction_inside",
+    "trials", "frames", "nees_pose_mean", "nees_pose_bounds", "nees_pose_fraction_inside", "nees_pose_fraction_above",
     "nees_landmark_mean", "nees_landmark_bounds", "nees_landmark_count", "nis_mean", "nis_bounds", "nis_count",
     "ate_rmse", "ate_ratio_dead_reckoning", "final_error_mean", "landmark_error_mean", "landmarks_mean",
     "selection_precision", "selection_recall", "reobservation_selected", "reobservation_rejected",
@@ -671,6 +672,7 @@ def summarize(results: Sequence[dict]) -> dict:
                 "nees_pose_mean": _mean(v for r in rs for v in r["nees_pose"]),
                 "nees_pose_bounds": list(b_pose),
                 "nees_pose_fraction_inside": fraction_inside(nees_t, b_pose),
+                "nees_pose_fraction_above": fraction_inside(nees_t, (math.nextafter(b_pose[1], math.inf), math.inf)),
                 "nees_landmark_mean": _mean(lm_nees),
                 "nees_landmark_bounds": list(chi2_bounds(len(lm_nees), 1)) if lm_nees else [math.nan, math.nan],
                 "nees_landmark_count": len(lm_nees),
@@ -839,6 +841,7 @@ def goals_caveats(summary: dict, frames: int | None = None) -> list[str]:
 # ------------------------------------------------------------------ report
 REPORT_COLUMNS = (
     ("nees_pose_mean", "pose NEES", "{:.2f}"), ("nees_pose_fraction_inside", "frames inside", "{:.0%}"),
+    ("nees_pose_fraction_above", "frames above", "{:.0%}"),
     ("nees_landmark_mean", "landmark NEES", "{:.2f}"), ("nis_mean", "NIS", "{:.2f}"),
     ("ate_rmse", "ATE [m]", "{:.3f}"), ("ate_ratio_dead_reckoning", "ATE / DR", "{:.2f}"),
     ("landmark_error_mean", "landmark error [m]", "{:.3f}"), ("landmarks_mean", "landmarks", "{:.1f}"),

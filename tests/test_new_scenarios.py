@@ -199,6 +199,7 @@ def test_atrium_walls_clutter_and_door_frames():
     assert 0.03 < d < 0.08
 
 
+@pytest.mark.slow
 def test_atrium_recovered_pose_is_kept_when_the_edges_missed_before_it_are_found_after():
     """Atrium, trial 4 of `stablemarks eval atrium`: blind in a turn (frames 138-145, heading 4° off with σ 2.7°),
     the edges predicted in view were missed (edges_not_found from frame 145); at frame 146 four landmarks

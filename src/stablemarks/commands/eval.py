@@ -202,7 +202,8 @@ def run(args) -> int:
                         f"(pose NEES bounds [{lo:.2f}, {hi:.2f}])")
         t.add_column("method", no_wrap=True)
         for _, heading, _ in REPORT_COLUMNS:
-            t.add_column(heading, justify="right")
+            # no heading word cut short ("precisi…") where the console is narrower than the table would like
+            t.add_column(heading, justify="right", min_width=max(len(w) for w in heading.split()))
         for method, s in by_method.items():
             t.add_row(method, *(format_value(s[k], f) for k, _, f in REPORT_COLUMNS))
         console.print(t)

@@ -203,8 +203,8 @@ def test_atrium_walls_clutter_and_door_frames():
 def test_atrium_recovered_pose_is_kept_when_the_edges_missed_before_it_are_found_after():
     """Atrium, trial 4 of `stablemarks eval atrium`: blind in a turn (frames 138-145, heading 4° off with σ 2.7°),
     the edges predicted in view were missed (edges_not_found from frame 145); at frame 146 four landmarks
-    recovered the pose to 12 mm and 0.1°. At frame 147 one wall fitted across clutter was taken for edges still
-    missing, and the recovery for unconfirmed: the rest of the run fell back on dead reckoning, 0.6 m off. A
+    recovered the pose to 12 mm and 0.1°. At frame 147 one wall fitted turned 8° from the map's was taken for edges
+    still missing, and the recovery for unconfirmed: the rest of the run fell back on dead reckoning, 0.6 m off. A
     recovery is now unconfirmed only when the edges are missed in health.edges_frames frames after it."""
     from stablemarks.evaluation import make_trials, run_trial
 

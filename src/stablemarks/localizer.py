@@ -1088,8 +1088,8 @@ class Localizer:
                 self._recoveries.popleft()
             # A recovered pose is not confirmed when the free edges are then missed where the map puts them from it,
             # in health.edges_frames frames in a row after it (not when missed before it: the edges a pose off in a
-            # blind turn misses are what the recovery corrects, and one wall fitted across clutter in the next frame
-            # is no evidence against it)
+            # blind turn misses are what the recovery corrects, and one wall fitted turned from the map's in the next
+            # frame is no evidence against it)
             drift = self._heading_drift() or \
                 ((0.0, 0.0, "recoveries") if len(self._recoveries) >= h.max_recoveries else None) or \
                 ((0.0, 0.0, "unconfirmed") if self._recoveries and not recovering

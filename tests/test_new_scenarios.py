@@ -49,7 +49,9 @@ def test_built_in_with_a_camera_unlike_the_lab(name):
     assert sc.name == name and sc.robot.pan.policy == "look_at_free_edges"
     assert sc.camera.f != lab.camera.f and sc.camera.baseline != lab.camera.baseline
     assert (sc.camera.width, sc.camera.height) != (lab.camera.width, lab.camera.height)
-    assert free_standing(sc) and sum(len(p.free_edges) for p in sc.map.planes if p.reference) >= 4
+    # office and hall: two free-standing walls or more; atrium: one, and an opening's two jambs
+    assert len(free_standing(sc)) >= (1 if name == "atrium" else 2)
+    assert sum(len(p.free_edges) for p in sc.map.planes if p.reference) >= 4
     # the map is the walls in it; clutter and world-only walls (lintels) are in no map
     ids = {p.id for p in sc.map.planes}
     assert not ids & {b.id for b in sc.boxes} and not ids & {p.id for p in sc.poles}
@@ -178,7 +180,7 @@ def test_runs_through_the_whole_loop(name):
 def test_atrium_walls_clutter_and_door_frames():
     sc = load_scenario("atrium")
     refs = [p for p in sc.map.planes if p.reference]
-    # no wall parallel to an axis, nor two walls parallel to each other
+    # no wall parallel to an axis, nor two walls parallel to each other but the two halves of the north wall
     assert min(axis_angle_deg(p.direction) for p in refs) > 5.0
     dirs = [p.direction for p in refs if p.id not in ("north-a", "north-b")]  # one wall with an opening
     for i, a in enumerate(dirs):

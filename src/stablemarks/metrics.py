@@ -14,7 +14,7 @@ Definitions (also in the README):
 - **χ² bounds** for an average of ``N`` independent ``d``-dof values:
   ``[χ²⁻¹(0.025; N·d)/N, χ²⁻¹(0.975; N·d)/N]`` (d = 3, N = 50: [2.36, 3.72]). The pose NEES is averaged
   over the ``N`` runs at each time step and :func:`fraction_inside` counts the steps whose average lies
-  inside the bounds.
+  inside the bounds, :func:`fraction_above` those above them (overconfident).
 - **Re-observation rate** of a landmark — the fraction of the later frames in which its true feature is in
   view and unoccluded in both images where the landmark was associated with a segment pair.
 """
@@ -70,6 +70,14 @@ def chi2_bounds(n_runs: int, dof: int, probability: float = 0.95) -> tuple[float
     a = (1.0 - probability) / 2.0
     nd = n_runs * dof
     return float(chi2.ppf(a, nd) / n_runs), float(chi2.ppf(1.0 - a, nd) / n_runs)
+
+
+def fraction_above(values: np.ndarray, bound: float) -> float:
+    """Fraction of ``values`` (n,) above ``bound`` (NaN when there are none)."""
+    v = np.asarray(values, dtype=float)
+    if v.size == 0:
+        return float("nan")
+    return float(np.mean(v > bound))
 
 
 def fraction_inside(values: np.ndarray, bounds: tuple[float, float]) -> float:
